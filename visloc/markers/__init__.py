@@ -1,0 +1,6 @@
+"""Square fiducial markers: the report's staged detector (Appendix G) and dictionaries."""
+
+from visloc.markers.detector import DetectionTrace, DetectorParams, MarkerDetector
+from visloc.markers.dictionary import Dictionary, load_dictionary
+
+__all__ = ["MarkerDetector", "DetectorParams", "DetectionTrace", "Dictionary", "load_dictionary"]

@@ -1,0 +1,30 @@
+"""Shared pytest fixtures and helpers."""
+
+import cv2
+import numpy as np
+import pytest
+
+
+def render_square(size=(120, 100), corners=None, supersample=8, dark=30, bright=220, blur=0.0):
+    """An anti-aliased dark quadrilateral on a bright background, exact to the pixel-centre
+    convention (pixel (c, r) covers [c - 0.5, c + 0.5] x [r - 0.5, r + 0.5])."""
+    w, h = size
+    s = supersample
+    q = np.asarray(corners, np.float64)
+    # centres of the supersampled pixels, in image coordinates
+    ys, xs = np.meshgrid((np.arange(h * s) + 0.5) / s - 0.5, (np.arange(w * s) + 0.5) / s - 0.5, indexing="ij")
+    inside = np.ones(ys.shape, bool)
+    sign = np.sign(np.cross(q[1] - q[0], q[2] - q[1]))
+    for k in range(4):  # convex quad: inside every edge's half-plane
+        a, b = q[k], q[(k + 1) % 4]
+        inside &= sign * ((b[0] - a[0]) * (ys - a[1]) - (b[1] - a[1]) * (xs - a[0])) >= 0
+    big = np.where(inside, float(dark), float(bright))
+    img = big.reshape(h, s, w, s).mean(axis=(1, 3))
+    if blur > 0:
+        img = cv2.GaussianBlur(img, (0, 0), blur)
+    return np.clip(np.round(img), 0, 255).astype(np.uint8)
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(12345)

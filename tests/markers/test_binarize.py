@@ -1,0 +1,57 @@
+import numpy as np
+import pytest
+
+from visloc.markers.binarize import blur, default_window, threshold, to_gray
+
+
+def test_to_gray_converts_bgr_and_keeps_gray():
+    bgr = np.zeros((4, 5, 3), np.uint8)
+    bgr[..., 2] = 255  # pure red
+    g = to_gray(bgr)
+    assert g.shape == (4, 5) and g.dtype == np.uint8
+    assert abs(int(g[0, 0]) - 76) <= 1  # OpenCV luma weight of red: 0.299
+    gray = np.arange(20, dtype=np.uint8).reshape(4, 5)
+    assert to_gray(gray) is gray
+
+
+@pytest.mark.parametrize(
+    "bad, exc",
+    [
+        (np.zeros((0, 5), np.uint8), ValueError),
+        (np.zeros((1, 1), np.uint8), ValueError),
+        (np.zeros((4, 5), np.float32), TypeError),
+        (np.full((4, 5), np.nan), TypeError),
+        (np.zeros((4, 5, 2), np.uint8), ValueError),
+        (np.zeros((2, 4, 5, 3), np.uint8), ValueError),
+        ([[1, 2], [3, 4]], TypeError),
+    ],
+)
+def test_to_gray_rejects_bad_images(bad, exc):
+    with pytest.raises(exc, match="image"):
+        to_gray(bad)
+
+
+def test_blur_zero_is_identity_and_blur_smooths():
+    img = np.zeros((21, 21), np.uint8)
+    img[10, 10] = 255
+    assert blur(img, 0) is img
+    b = blur(img, 1.0)
+    assert b[10, 10] < 255 and b[10, 11] > 0 and b.sum() > 0
+    with pytest.raises(ValueError, match="sigma"):
+        blur(img, -1)
+
+
+def test_threshold_marks_dark_border_of_a_square_as_ink():
+    img = np.full((60, 60), 200, np.uint8)
+    img[20:40, 20:40] = 40
+    b = threshold(img, window=7, offset=7)
+    assert b.dtype == np.uint8 and set(np.unique(b)) <= {0, 255}
+    assert b[20, 30] == 255 and b[39, 30] == 255  # dark pixels next to the edge are ink
+    assert b[5, 5] == 0 and b[30, 30] == 0  # flat areas (bright or dark) are not
+    with pytest.raises(ValueError, match="window"):
+        threshold(img, window=4)
+
+
+def test_default_window_is_odd_and_scales():
+    assert default_window((480, 640)) % 2 == 1
+    assert default_window((240, 320)) < default_window((1080, 1920))

@@ -1,0 +1,57 @@
+import cv2
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from visloc.markers.dictionary import PREDEFINED, load_dictionary
+
+TUTORIAL_DICT = "datasets/real/tutorial_dict.yml"
+
+
+@pytest.mark.parametrize("name", ["DICT_4X4_50", "DICT_6X6_250", "DICT_APRILTAG_36h11", "DICT_ARUCO_ORIGINAL"])
+def test_marker_images_match_opencv(name):
+    d = load_dictionary(name)
+    cv_dict = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, name))
+    for marker_id in (0, 1, len(d) - 1):
+        ours = d.marker_image(marker_id, cell_px=5)
+        theirs = cv2.aruco.generateImageMarker(cv_dict, marker_id, ours.shape[0])
+        assert np.array_equal(ours, theirs)
+
+
+def test_names_are_case_tolerant_and_unknown_names_fail():
+    assert len(load_dictionary("DICT_APRILTAG_36H11")) == 587
+    assert load_dictionary("4X4_50").marker_size == 4
+    assert "DICT_ARUCO_MIP_36h12" in PREDEFINED
+    with pytest.raises(ValueError, match="unknown dictionary"):
+        load_dictionary("DICT_9X9_1")
+
+
+def test_yaml_dictionary_matches_opencv_reader():
+    d = load_dictionary(TUTORIAL_DICT)
+    fs = cv2.FileStorage(TUTORIAL_DICT, cv2.FILE_STORAGE_READ)
+    ref = cv2.aruco.Dictionary()
+    ref.readDictionary(fs.root())
+    assert len(d) == 35 and d.marker_size == 6
+    for i in range(len(d)):
+        bits = cv2.aruco.Dictionary.getBitsFromByteList(ref.bytesList[i : i + 1], 6)
+        assert np.array_equal(d.bits[i], bits)
+    assert d.max_correction >= 1
+
+
+def test_malformed_yaml_is_rejected(tmp_path):
+    p = tmp_path / "bad.yml"
+    p.write_text('%YAML:1.0\nnmarkers: 1\nmarkersize: 4\nmarker_0: "0101"\n')
+    with pytest.raises(ValueError, match="marker_0"):
+        load_dictionary(str(p))
+
+
+@settings(max_examples=40, deadline=None)
+@given(marker_id=st.integers(0, 249), rot=st.integers(0, 3), flips=st.integers(0, 2))
+def test_match_finds_any_rotation_with_errors(marker_id, rot, flips):
+    d = load_dictionary("DICT_6X6_250")
+    bits = np.rot90(d.bits[marker_id], rot).copy()
+    for k in range(flips):
+        bits.flat[7 * k + 3] ^= 1
+    hit = d.match(bits, d.max_correction)
+    assert hit == (marker_id, rot, flips)

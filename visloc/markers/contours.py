@@ -1,0 +1,108 @@
+"""Stages 4-5 of the marker pipeline: contour following and candidate filtering.
+
+Report Appendix G: "From the binary image all the contours are determined ... Then all closed
+contours are determined using a line following method" (Figure G.1.C). OpenCV's border
+follower (Suzuki-Abe) is used; only *outer* borders of ink regions are kept, so the inner
+border of a marker's black frame never becomes a second candidate.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+_NEXT = np.array([1, 2, 3, 0])
+
+__all__ = ["find_contours", "filter_candidates", "CandidateFilter"]
+
+
+def find_contours(binary: NDArray[np.uint8]) -> list[NDArray[np.int32]]:
+    """Stage 4: outer borders of the ink (255) regions of a binary image.
+
+    Returns a list of ``(N, 2)`` int32 arrays of ``(x, y)`` pixel centres, each a closed
+    8-connected border traced in order. Holes (inner borders) are left out.
+    """
+    if binary.ndim != 2 or binary.dtype != np.uint8:
+        raise ValueError(f"binary must be a (H, W) uint8 image, got {binary.shape} {binary.dtype}")
+    contours, hierarchy = cv2.findContours(binary, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
+    if hierarchy is None:
+        return []
+    outer = np.flatnonzero(hierarchy[0, :, 3] < 0)
+    return [contours[i].reshape(-1, 2) for i in outer]
+
+
+@dataclass(frozen=True)
+class CandidateFilter:
+    """Bounds a contour must meet to be a marker candidate (stage 5).
+
+    Attributes
+    ----------
+    min_perimeter_rate, max_perimeter_rate : float
+        Contour length bounds as fractions of the image's larger side (OpenCV's 0.03 and 4.0).
+    approx_rate : float
+        Polygon approximation tolerance as a fraction of the perimeter; the contour must
+        simplify to exactly four vertices.
+    min_side : float
+        Shortest allowed side of that quadrilateral, px.
+    min_solidity : float
+        Contour area over its convex hull's area; squares seen in perspective are ~1.
+    border_distance : float
+        Vertices closer than this to the image border reject the candidate (its true corner
+        may lie outside the image).
+    """
+
+    min_perimeter_rate: float = 0.03
+    max_perimeter_rate: float = 4.0
+    approx_rate: float = 0.05
+    min_side: float = 6.0
+    min_solidity: float = 0.85
+    border_distance: float = 2.0
+
+
+def filter_candidates(
+    contours: list[NDArray[np.int32]],
+    image_shape: tuple[int, ...],
+    params: CandidateFilter = CandidateFilter(),
+) -> list[tuple[NDArray[np.int32], NDArray[np.int32]]]:
+    """Stage 5: keep contours that may be the outer border of a square marker.
+
+    Tests, cheapest first: contour length within the perimeter bounds relative to the image
+    size; a four-vertex convex polygon approximation (convexity); every side at least
+    ``min_side``; solidity; no vertex near the image border.
+
+    Returns
+    -------
+    list of (contour, quad)
+        The surviving contours with the vertices (4, 2) of their approximating polygon.
+    """
+    h, w = image_shape[:2]
+    size = max(h, w)
+    lo = max(params.min_perimeter_rate * size, 4 * params.min_side)
+    hi = params.max_perimeter_rate * size
+    lengths = np.fromiter((len(c) for c in contours), np.int64, len(contours))
+    keep = np.flatnonzero((lengths >= lo) & (lengths <= hi))
+    bd = params.border_distance
+    out = []
+    for i in keep:
+        c = contours[i]
+        approx = cv2.approxPolyDP(c, params.approx_rate * len(c), True)
+        if len(approx) != 4:
+            continue
+        q = approx.reshape(4, 2)
+        if not cv2.isContourConvex(q):
+            continue
+        d = q[_NEXT] - q
+        sides = np.sqrt((d * d).sum(axis=1))
+        if sides.min() < params.min_side:
+            continue
+        if q.min() < bd or (q[:, 0] > w - 1 - bd).any() or (q[:, 1] > h - 1 - bd).any():
+            continue
+        area = cv2.contourArea(c)
+        hull = cv2.contourArea(cv2.convexHull(c))
+        if hull <= 0 or area / hull < params.min_solidity:
+            continue
+        out.append((c, q))
+    return out

@@ -1,0 +1,263 @@
+"""Stages 6-7 of the marker pipeline: radial-peak corner split and total-least-squares line fits.
+
+Report Appendix G (Figure G.1.D-F): the contour centre is the mean of its points; the distance
+of every contour point to it, smoothed with a Gaussian kernel, peaks at the four corners; the
+peaks split the contour into four groups, taken with a padding away from each peak to avoid the
+corners rounded by the blur; a line is fitted to each group and the corners are the
+intersections of consecutive lines.
+
+Where the report special-cases near-vertical lines, the fit here is total least squares (the
+line's normal is the covariance's minor eigenvector), which has no singular direction.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+_NEXT = np.array([1, 2, 3, 0])
+_PREV = np.array([3, 0, 1, 2])
+
+__all__ = [
+    "RadialSplit",
+    "radial_profile",
+    "radial_peaks",
+    "split_sides",
+    "fit_line",
+    "fit_lines",
+    "intersect_lines",
+    "quad_from_lines",
+    "fit_quad",
+    "orient_clockwise",
+]
+
+
+@dataclass(frozen=True, eq=False)
+class RadialSplit:
+    """Result of the radial-peak corner split of one contour.
+
+    Attributes
+    ----------
+    center : ndarray (2,)
+        Mean of the contour points.
+    distance : ndarray (N,)
+        Distance of every contour point to ``center``.
+    smoothed : ndarray (N,)
+        ``distance`` after circular Gaussian smoothing.
+    peaks : ndarray (4,) int
+        Contour indices of the four corners, in contour order.
+    groups : list of ndarray
+        Contour indices of the four sides' points (peak i to peak i+1, padded).
+    """
+
+    center: NDArray[np.float64]
+    distance: NDArray[np.float64]
+    smoothed: NDArray[np.float64]
+    peaks: NDArray[np.intp]
+    groups: list[NDArray[np.intp]]
+
+
+def radial_profile(contour: NDArray, sigma: float | None = None) -> tuple[NDArray, NDArray, NDArray]:
+    """Centre, point-to-centre distance and its circular Gaussian smoothing.
+
+    Parameters
+    ----------
+    contour : ndarray (N, 2)
+        Closed contour, points in order.
+    sigma : float, optional
+        Smoothing in contour points; defaults to ``max(1, N / 100)``.
+    """
+    pts = np.asarray(contour, np.float64)
+    center = pts.mean(axis=0)  # report App. G: centre = mean of the contour pixels
+    dist = np.hypot(pts[:, 0] - center[0], pts[:, 1] - center[1])
+    n = len(dist)
+    s = max(1.0, n / 100.0) if sigma is None else float(sigma)
+    r = min(int(np.ceil(3 * s)), (n - 1) // 2)
+    if r < 1:
+        return center, dist, dist.copy()
+    x = np.arange(-r, r + 1)
+    k = np.exp(-0.5 * (x / s) ** 2)
+    k /= k.sum()
+    padded = np.concatenate([dist[-r:], dist, dist[:r]])  # circular: the contour is closed
+    return center, dist, np.convolve(padded, k, mode="valid")
+
+
+def radial_peaks(smoothed: NDArray, count: int = 4, min_prominence: float | None = None) -> NDArray[np.intp] | None:
+    """Indices of the ``count`` most significant maxima of a circular profile, in order.
+
+    Maxima closer than ``N / 16`` points to a higher one are merged; of the rest, the
+    ``count`` with the largest prominence (height above the higher of the two valleys that
+    separate the peak from its neighbouring peaks) are kept. Returns ``None`` when fewer than
+    ``count`` maxima rise at least ``min_prominence`` (default: 2 % of the mean + 0.25).
+    """
+    d = np.asarray(smoothed, np.float64)
+    n = len(d)
+    prev = np.concatenate([d[-1:], d[:-1]])
+    nxt = np.concatenate([d[1:], d[:1]])
+    idx = np.flatnonzero((d > prev) & (d >= nxt))
+    if len(idx) < count:
+        return None
+    order = idx[np.argsort(-d[idx])]
+    min_gap = max(2, n // 16)
+    chosen: list[int] = []
+    for i in order.tolist():
+        if all(min(abs(i - j), n - abs(i - j)) >= min_gap for j in chosen):
+            chosen.append(i)
+    if len(chosen) < count:
+        return None
+    ch = np.sort(np.array(chosen))
+    start = ch[0]
+    rolled = np.concatenate([d[start:], d[:start]])
+    valley = np.minimum.reduceat(rolled, ch - start)  # segment k: peak k .. peak k+1
+    prom = d[ch] - np.maximum(valley, np.concatenate([valley[-1:], valley[:-1]]))
+    floor = 0.02 * d.mean() + 0.25 if min_prominence is None else min_prominence
+    strong = prom >= floor
+    if strong.sum() < count:
+        return None
+    ch, prom = ch[strong], prom[strong]
+    if len(ch) > count:
+        ch = np.sort(ch[np.argsort(-prom)[:count]])
+    return ch.astype(np.intp)
+
+
+def split_sides(n: int, peaks: NDArray[np.intp], padding: float = 0.1) -> list[NDArray[np.intp]]:
+    """Contour indices of the four sides between consecutive ``peaks`` (circular).
+
+    ``padding`` is the fraction of each side's length dropped at both ends, plus one point,
+    so the rounded corners do not bend the fitted lines (report App. G, Figure G.1.E).
+    """
+    groups = []
+    for k in range(len(peaks)):
+        a = int(peaks[k])
+        b = int(peaks[(k + 1) % len(peaks)])
+        length = (b - a) % n
+        pad = int(padding * length) + 1
+        groups.append((a + np.arange(pad, length - pad + 1)) % n)
+    return groups
+
+
+def fit_line(points: NDArray, weights: NDArray | None = None) -> NDArray[np.float64]:
+    """Total-least-squares line through ``points`` (M, 2).
+
+    Returns ``(a, b, c)`` with ``a x + b y = c`` and ``a^2 + b^2 = 1``: the normal is the
+    minor eigenvector of the (weighted) scatter matrix, so vertical lines need no special case.
+    """
+    p = np.asarray(points, np.float64)
+    if p.ndim != 2 or len(p) < 2:
+        raise ValueError(f"points must be (M >= 2, 2), got {p.shape}")
+    return fit_lines(p[None], None if weights is None else np.asarray(weights)[None])[0]
+
+
+def fit_lines(points: NDArray, weights: NDArray | None = None) -> NDArray[np.float64]:
+    """Total-least-squares lines through K sets of points at once.
+
+    Parameters
+    ----------
+    points : ndarray (K, M, 2)
+    weights : ndarray (K, M), optional
+        Non-negative weights; 0 leaves a point out (for sets of different sizes).
+
+    Returns
+    -------
+    ndarray (K, 3)
+        ``(a, b, c)`` per line, ``a x + b y = c``, unit normal.
+    """
+    p = np.asarray(points, np.float64)
+    w = np.ones(p.shape[:2]) if weights is None else np.asarray(weights, np.float64)
+    sw = np.maximum(w.sum(axis=1), 1e-12)
+    m = (w[..., None] * p).sum(axis=1) / sw[:, None]
+    qx = p[..., 0] - m[:, 0:1]
+    qy = p[..., 1] - m[:, 1:2]
+    wqx = w * qx
+    sxx = (wqx * qx).sum(axis=1)
+    syy = (w * qy * qy).sum(axis=1)
+    sxy = (wqx * qy).sum(axis=1)
+    theta = 0.5 * np.arctan2(2 * sxy, sxx - syy)  # direction of the major axis
+    a, b = -np.sin(theta), np.cos(theta)
+    return np.stack([a, b, a * m[:, 0] + b * m[:, 1]], axis=1)
+
+
+def intersect_lines(l1: NDArray, l2: NDArray) -> NDArray[np.float64]:
+    """Intersection point (2,) of two lines ``a x + b y = c``; NaN when parallel."""
+    det = l1[0] * l2[1] - l1[1] * l2[0]
+    if abs(det) < 1e-12:
+        return np.array([np.nan, np.nan])
+    x = (l1[2] * l2[1] - l1[1] * l2[2]) / det
+    y = (l1[0] * l2[2] - l1[2] * l2[0]) / det
+    return np.array([x, y])
+
+
+def quad_from_lines(lines: NDArray) -> NDArray[np.float64]:
+    """Corners (..., 4, 2) of the quadrilaterals bounded by four lines (..., 4, 3) in order:
+    corner k is the intersection of side k-1 and side k (NaN where two sides are parallel)."""
+    l1 = lines[..., _PREV, :]
+    l2 = lines
+    det = l1[..., 0] * l2[..., 1] - l1[..., 1] * l2[..., 0]
+    det = np.where(np.abs(det) < 1e-12, np.nan, det)
+    x = (l1[..., 2] * l2[..., 1] - l1[..., 1] * l2[..., 2]) / det
+    y = (l1[..., 0] * l2[..., 2] - l1[..., 2] * l2[..., 0]) / det
+    return np.stack([x, y], axis=-1)
+
+
+def orient_clockwise(quad: NDArray) -> NDArray:
+    """Return ``quad`` (4, 2) ordered clockwise in the image (y down), starting at its first corner."""
+    x, y = quad[:, 0], quad[:, 1]
+    area2 = np.dot(x, y[_NEXT]) - np.dot(x[_NEXT], y)
+    return quad if area2 > 0 else quad[[0, 3, 2, 1]]
+
+
+def fit_quad(
+    contour: NDArray, *, sigma: float | None = None, padding: float = 0.1, hint: NDArray | None = None
+) -> tuple[NDArray[np.float64], RadialSplit] | None:
+    """Stages 6-7 for one contour: radial-peak split, line fits, corners at the intersections.
+
+    The contour points are centres of the outermost ink pixels, half a pixel inside the
+    ink's true edge; the lines are moved outward by 0.5 px to compensate.
+
+    Parameters
+    ----------
+    contour : ndarray (N, 2)
+    sigma, padding
+        See :func:`radial_profile` and :func:`split_sides`.
+    hint : ndarray (4, 2), optional
+        Approximate corners (e.g. a polygon approximation) used when the radial profile
+        has fewer than four significant peaks (a very oblique view can hide a corner's peak).
+
+    Returns
+    -------
+    (corners, split) or None
+        Corners (4, 2) clockwise in the image, and the split for inspection; ``None`` when no
+        four corners could be found.
+    """
+    pts = np.asarray(contour, np.float64)
+    center, dist, smooth = radial_profile(pts, sigma)
+    peaks = radial_peaks(smooth)
+    if peaks is None:
+        if hint is None:
+            return None
+        h = np.asarray(hint, np.float64)
+        peaks = np.sort(np.argmin(((pts[None, :, :] - h[:, None, :]) ** 2).sum(-1), axis=1))
+        if len(np.unique(peaks)) < 4:
+            return None
+    groups = split_sides(len(pts), peaks, padding)
+    sizes = [len(g) for g in groups]
+    if min(sizes) < 2:
+        return None
+    m = max(sizes)
+    idx = np.zeros((4, m), np.intp)
+    w = np.zeros((4, m))
+    for k, g in enumerate(groups):
+        idx[k, : len(g)] = g
+        w[k, : len(g)] = 1.0
+    lines = fit_lines(pts[idx], w)
+    # orient normals outward (away from the centre), then shift by 0.5 px
+    inward = lines[:, 0] * center[0] + lines[:, 1] * center[1] > lines[:, 2]
+    lines[inward] *= -1
+    lines[:, 2] += 0.5
+    corners = quad_from_lines(lines)
+    if not np.isfinite(corners).all():
+        return None
+    split = RadialSplit(center, dist, smooth, peaks, groups)
+    return orient_clockwise(corners), split

@@ -14,7 +14,8 @@ def render_square(size=(120, 100), corners=None, supersample=8, dark=30, bright=
     # centres of the supersampled pixels, in image coordinates
     ys, xs = np.meshgrid((np.arange(h * s) + 0.5) / s - 0.5, (np.arange(w * s) + 0.5) / s - 0.5, indexing="ij")
     inside = np.ones(ys.shape, bool)
-    sign = np.sign(np.cross(q[1] - q[0], q[2] - q[1]))
+    e1, e2 = q[1] - q[0], q[2] - q[1]
+    sign = np.sign(e1[0] * e2[1] - e1[1] * e2[0])
     for k in range(4):  # convex quad: inside every edge's half-plane
         a, b = q[k], q[(k + 1) % 4]
         inside &= sign * ((b[0] - a[0]) * (ys - a[1]) - (b[1] - a[1]) * (xs - a[0])) >= 0

@@ -1,0 +1,44 @@
+"""Input and output: frame sources, result writers, annotated images and rerun recordings.
+
+Sources
+    :func:`open_source` (image, folder, glob, video, camera) -> :class:`FrameSource` of
+    :class:`visloc.types.Frame`; :class:`SourceError` when a source cannot be opened.
+Writers
+    :class:`JsonlWriter`, :class:`CsvWriter` (flushed per record), :class:`AnnotationSink`
+    (video or PNG folder), :func:`draw_markers`.
+Visualisation
+    :class:`RerunLogger` writes a rerun ``.rrd`` recording.
+"""
+
+from visloc.io.draw import draw_markers
+from visloc.io.rerun_log import RerunLogger
+from visloc.io.sources import (
+    IMAGE_EXTENSIONS,
+    VIDEO_EXTENSIONS,
+    CameraSource,
+    FrameSource,
+    ImageListSource,
+    SourceError,
+    VideoSource,
+    open_source,
+    read_image,
+)
+from visloc.io.writers import AnnotationSink, CsvWriter, JsonlWriter, to_jsonable
+
+__all__ = [
+    "IMAGE_EXTENSIONS",
+    "VIDEO_EXTENSIONS",
+    "AnnotationSink",
+    "CameraSource",
+    "CsvWriter",
+    "FrameSource",
+    "ImageListSource",
+    "JsonlWriter",
+    "RerunLogger",
+    "SourceError",
+    "VideoSource",
+    "draw_markers",
+    "open_source",
+    "read_image",
+    "to_jsonable",
+]

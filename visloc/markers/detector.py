@@ -161,7 +161,7 @@ class MarkerDetector:
             return []
         quads_a = np.array(quads)
         n_cells = self.dictionary.marker_size + 2
-        cells = sample_cells(blurred, quads_a, n_cells)  # stage 9, batched
+        cells = sample_cells(gray, quads_a, n_cells)  # stage 9, batched
         valid, bits, margin, contrast = read_bits(cells, p.border_error_rate)
         ids, shift, hamming, matched = decode(bits, self.dictionary, p.error_correction_rate)  # 10
         good = valid & matched

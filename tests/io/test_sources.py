@@ -1,0 +1,218 @@
+"""Frame sources: folders, globs, single images, videos, bad input."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from visloc.io import FrameSource, SourceError, open_source, read_image
+from visloc.io.sources import ImageListSource
+from visloc.types import Frame
+
+
+def _grey(value: int, shape: tuple[int, int] = (24, 32)) -> np.ndarray:
+    return np.full(shape, value, np.uint8)
+
+
+def _write(path: Path, image: np.ndarray) -> Path:
+    assert cv2.imwrite(str(path), image), path
+    return path
+
+
+def _write_video(path: Path, fourcc: str, n: int = 5, fps: float = 10.0) -> list[int]:
+    """Write n frames of 64x48 with distinct uniform grey levels; return the levels."""
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*fourcc), fps, (64, 48))
+    assert writer.isOpened(), f"codec {fourcc} cannot write {path.suffix} here"
+    levels = [20 + 50 * i for i in range(n)]
+    for v in levels:
+        writer.write(np.full((48, 64, 3), v, np.uint8))
+    writer.release()
+    return levels
+
+
+def test_folder_yields_images_in_sorted_order(tmp_path: Path) -> None:
+    for name, value in [("b.png", 2), ("a.png", 1), ("c.jpg", 3), ("D.PNG", 4)]:
+        _write(tmp_path / name, _grey(value * 40))
+    (tmp_path / "notes.txt").write_text("not an image")
+    (tmp_path / "sub").mkdir()
+    _write(tmp_path / "sub" / "e.png", _grey(200))
+
+    source = open_source(str(tmp_path))
+    frames = list(source)
+
+    names = [Path(f.name).name for f in frames]
+    assert names == sorted(["a.png", "b.png", "c.jpg", "D.PNG"])
+    assert len(source) == 4
+    assert source.description == f"folder {tmp_path} (4 images)"
+    assert [f.index for f in frames] == [0, 1, 2, 3]
+    assert [f.time for f in frames] == [0.0, 1.0, 2.0, 3.0]  # no fps: one second per frame
+    for f in frames:
+        assert isinstance(f, Frame) and f.error is None
+        assert f.image is not None and f.image.dtype == np.uint8 and f.image.shape == (24, 32)
+    assert frames[1].image[0, 0] == 40  # a.png, lossless
+    assert frames[0].image[0, 0] == 160  # D.PNG
+
+
+def test_folder_times_use_fps_and_source_iterates_twice(tmp_path: Path) -> None:
+    for i in range(3):
+        _write(tmp_path / f"f{i}.png", _grey(i))
+    source = open_source(tmp_path, fps=4.0)
+    assert [f.time for f in source] == [0.0, 0.25, 0.5]
+    assert [f.index for f in source] == [0, 1, 2]
+
+
+def test_glob_keeps_matching_images_only(tmp_path: Path) -> None:
+    _write(tmp_path / "x1.png", _grey(1))
+    _write(tmp_path / "x2.png", _grey(2))
+    _write(tmp_path / "y1.png", _grey(3))
+    _write(tmp_path / "x3.jpg", _grey(4))
+    pattern = str(tmp_path / "x?.png")
+    source = open_source(pattern)
+    assert [Path(f.name).name for f in source] == ["x1.png", "x2.png"]
+    assert source.description == f"glob {pattern} (2 images)"
+    with pytest.raises(SourceError, match="matches no image file"):
+        open_source(str(tmp_path / "z*.png"))
+
+
+def test_single_image(tmp_path: Path) -> None:
+    path = _write(tmp_path / "one.jpg", np.zeros((10, 12, 3), np.uint8))
+    source = open_source(str(path), fps=25)
+    (frame,) = list(source)
+    assert len(source) == 1
+    assert frame.name == str(path) and frame.index == 0 and frame.time == 0.0
+    assert frame.image.shape == (10, 12, 3) and frame.image.dtype == np.uint8
+
+
+@pytest.mark.parametrize(("suffix", "fourcc"), [(".mp4", "mp4v"), (".avi", "MJPG")])
+def test_video_frames_count_and_timestamps(tmp_path: Path, suffix: str, fourcc: str) -> None:
+    path = tmp_path / f"clip{suffix}"
+    levels = _write_video(path, fourcc, n=5, fps=10.0)
+
+    with open_source(str(path)) as source:
+        assert len(source) == 5
+        assert source.description == f"video {path} (5 frames, 10 fps)"
+        frames = list(source)
+        again = list(source)  # a new iteration starts from the first frame
+    assert source.closed
+
+    assert [f.index for f in frames] == [0, 1, 2, 3, 4]
+    assert [f.name for f in frames] == [f"{path}#{i}" for i in range(5)]
+    np.testing.assert_allclose([f.time for f in frames], [0.0, 0.1, 0.2, 0.3, 0.4], atol=1e-6)
+    for f, level in zip(frames, levels, strict=True):
+        assert f.image.shape == (48, 64, 3) and f.image.dtype == np.uint8
+        assert abs(float(f.image.mean()) - level) < 6  # lossy codec
+    assert len(again) == 5 and np.array_equal(again[0].image, frames[0].image)
+    with pytest.raises(ValueError, match="closed"):
+        iter(source)
+
+
+def test_video_fps_overrides_container_times(tmp_path: Path) -> None:
+    path = tmp_path / "clip.mp4"
+    _write_video(path, "mp4v", n=3, fps=10.0)
+    with open_source(path, fps=2.0) as source:
+        assert [f.time for f in source] == [0.0, 0.5, 1.0]
+
+
+def test_corrupt_image_yields_error_frame_and_iteration_goes_on(tmp_path: Path) -> None:
+    _write(tmp_path / "a.png", _grey(10))
+    (tmp_path / "b.png").write_bytes(b"\x89PNG garbage, not an image" * 10)
+    (tmp_path / "c.png").write_bytes(b"")
+    _write(tmp_path / "d.png", _grey(30))
+
+    frames = list(open_source(tmp_path))
+
+    assert [f.index for f in frames] == [0, 1, 2, 3]
+    assert frames[0].error is None and frames[3].error is None
+    assert frames[3].image[0, 0] == 30
+    for f in frames[1:3]:
+        assert f.image is None
+        assert f.error == f"cannot read image {f.name}"
+
+
+def test_nonexistent_path_raises_source_error(tmp_path: Path) -> None:
+    missing = tmp_path / "nowhere" / "x.png"
+    with pytest.raises(SourceError, match="path does not exist") as info:
+        open_source(str(missing))
+    assert str(missing) in str(info.value)
+    assert isinstance(info.value, ValueError)
+    assert "\n" not in str(info.value)
+
+
+def test_empty_folder_raises_source_error(tmp_path: Path) -> None:
+    with pytest.raises(SourceError, match=r"folder .* contains no image file"):
+        open_source(tmp_path)
+    (tmp_path / "readme.txt").write_text("x")
+    with pytest.raises(SourceError, match="contains no image file"):
+        open_source(tmp_path)
+
+
+def test_unreadable_video_and_camera_raise_source_error(tmp_path: Path) -> None:
+    bad = tmp_path / "broken.mp4"
+    bad.write_bytes(b"garbage" * 100)
+    with pytest.raises(SourceError, match="cannot open video"):
+        open_source(bad)
+    other = tmp_path / "data.xyz"
+    other.write_bytes(b"garbage")
+    with pytest.raises(SourceError, match="not an image or a readable video"):
+        open_source(other)
+    with pytest.raises(SourceError, match="cannot open camera 97"):
+        open_source(97)
+    with pytest.raises(SourceError, match="cannot open camera 98"):
+        open_source("98")
+    with pytest.raises(SourceError, match="camera index"):
+        open_source(-1)
+
+
+def test_bad_arguments() -> None:
+    with pytest.raises(TypeError, match="spec"):
+        open_source(True)  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match="spec"):
+        open_source(1.5)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="fps"):
+        open_source(".", fps=0)
+    with pytest.raises(ValueError, match="fps"):
+        open_source(".", fps=float("nan"))
+
+
+def test_16bit_png_is_scaled_to_uint8(tmp_path: Path) -> None:
+    img16 = np.array([[0, 256 * 100, 65535], [1000, 40000, 255]], np.uint16)
+    path = _write(tmp_path / "deep.png", img16)
+    image, error = read_image(path)
+    assert error is None
+    assert image.dtype == np.uint8 and image.shape == (2, 3)
+    np.testing.assert_array_equal(image, img16 >> 8)
+
+    colour16 = np.zeros((4, 5, 3), np.uint16)
+    colour16[..., 2] = 65535
+    (frame,) = open_source(_write(tmp_path / "deep_bgr.png", colour16))
+    assert frame.image.dtype == np.uint8 and frame.image.shape == (4, 5, 3)
+    assert frame.image[0, 0].tolist() == [0, 0, 255]
+
+
+def test_rgba_png_drops_alpha(tmp_path: Path) -> None:
+    bgra = np.zeros((6, 7, 4), np.uint8)
+    bgra[..., 0], bgra[..., 1], bgra[..., 2], bgra[..., 3] = 10, 20, 30, 0
+    (frame,) = open_source(_write(tmp_path / "rgba.png", bgra))
+    assert frame.image.shape == (6, 7, 3) and frame.image.dtype == np.uint8
+    np.testing.assert_array_equal(frame.image, bgra[..., :3])
+
+
+def test_len_of_unknown_length_source_raises_type_error() -> None:
+    class Endless(FrameSource):
+        def _frames(self):  # type: ignore[no-untyped-def]
+            yield Frame(0, 0.0, None, "x", "none")
+
+    source = Endless("endless")
+    with pytest.raises(TypeError, match="has no len"):
+        len(source)
+    assert len(list(source)) == 1  # list() copes, as with a generator
+
+
+def test_image_list_source_directly(tmp_path: Path) -> None:
+    paths = [_write(tmp_path / f"{i}.png", _grey(i)) for i in range(2)]
+    with ImageListSource([str(p) for p in paths], fps=10) as source:
+        assert repr(source) == "<ImageListSource: 2 images>"
+        assert [f.time for f in source] == [0.0, 0.1]

@@ -1,0 +1,433 @@
+"""Frame sources: one iterable over images, folders, glob patterns, videos and cameras.
+
+:func:`open_source` turns a command-line style ``spec`` into a :class:`FrameSource` that yields
+:class:`visloc.types.Frame` objects. Images are ``uint8`` grey or BGR (16-bit images are scaled
+down, alpha is dropped). A file that cannot be decoded does not stop a batch run: it yields a
+frame with ``image=None`` and ``error="cannot read image <path>"``.
+
+Examples
+--------
+>>> with open_source("flight/*.png", fps=30) as source:  # doctest: +SKIP
+...     for frame in source:
+...         if frame.error is None:
+...             process(frame.image)
+"""
+
+from __future__ import annotations
+
+import glob
+import math
+import os
+import time as _time
+from abc import ABC, abstractmethod
+from collections.abc import Iterator, Sequence
+from types import TracebackType
+from typing import Self
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from visloc.types import Frame
+
+__all__ = [
+    "IMAGE_EXTENSIONS",
+    "VIDEO_EXTENSIONS",
+    "CameraSource",
+    "FrameSource",
+    "ImageListSource",
+    "SourceError",
+    "VideoSource",
+    "open_source",
+    "read_image",
+]
+
+IMAGE_EXTENSIONS: frozenset[str] = frozenset(
+    {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp"}
+)
+"""File extensions (lower case) read as still images."""
+
+VIDEO_EXTENSIONS: frozenset[str] = frozenset({".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v"})
+"""File extensions (lower case) read as videos with ``cv2.VideoCapture``."""
+
+_GLOB_CHARS = frozenset("*?[")
+
+
+class SourceError(ValueError):
+    """A frame source cannot be opened (missing path, no images, unreadable video or camera)."""
+
+
+def _is_image_path(path: str) -> bool:
+    return os.path.splitext(path)[1].lower() in IMAGE_EXTENSIONS
+
+
+def _check_fps(fps: float | None) -> float | None:
+    if fps is None:
+        return None
+    if isinstance(fps, bool) or not isinstance(fps, (int, float, np.integer, np.floating)):
+        raise TypeError(f"fps must be a number or None, got {type(fps).__name__}")
+    if not math.isfinite(fps) or fps <= 0:
+        raise ValueError(f"fps must be a positive finite number, got {fps!r}")
+    return float(fps)
+
+
+def _to_uint8(image: NDArray) -> NDArray[np.uint8]:
+    """Convert a decoded image of any depth/channel count to uint8 grey or BGR.
+
+    Raises
+    ------
+    ValueError
+        If the dtype or channel count is not supported.
+    """
+    if image.ndim == 3:
+        channels = image.shape[2]
+        if channels in (1, 2):  # grey, or grey + alpha
+            image = image[:, :, 0]
+        elif channels == 4:  # BGRA: drop alpha
+            image = image[:, :, :3]
+        elif channels != 3:
+            raise ValueError(f"unsupported channel count {channels}")
+    elif image.ndim != 2:
+        raise ValueError(f"unsupported image shape {image.shape}")
+    if image.dtype == np.uint8:
+        out = image
+    elif image.dtype == np.uint16:
+        out = (image >> 8).astype(np.uint8)  # full 16-bit range onto 0..255, like cv2.imread
+    elif np.issubdtype(image.dtype, np.floating):
+        out = np.clip(np.nan_to_num(image) * 255.0 + 0.5, 0, 255).astype(np.uint8)
+    else:
+        raise ValueError(f"unsupported pixel type {image.dtype}")
+    return np.ascontiguousarray(out)
+
+
+def read_image(path: str | os.PathLike[str]) -> tuple[NDArray[np.uint8] | None, str | None]:
+    """Read an image file as uint8 grey or BGR, reporting failure instead of raising.
+
+    The file is decoded with ``cv2.imdecode(..., IMREAD_UNCHANGED)`` (so non-ASCII paths work
+    everywhere) and converted: 16-bit images are scaled by 1/256 (the full 16-bit range onto
+    0..255, as ``cv2.imread`` does), floating-point images are taken to span [0, 1], an alpha
+    channel is dropped and single-channel images stay grey.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The image file.
+
+    Returns
+    -------
+    image : ndarray (H, W) or (H, W, 3) uint8, or None
+        The pixels, or ``None`` when the file cannot be read or decoded.
+    error : str or None
+        ``None`` on success, else a message starting with ``"cannot read image <path>"``.
+    """
+    name = os.fspath(path)
+    try:
+        data = np.fromfile(name, dtype=np.uint8)
+    except OSError as exc:
+        return None, f"cannot read image {name}: {exc.strerror or exc}"
+    decoded = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    if decoded is None:
+        return None, f"cannot read image {name}"
+    try:
+        return _to_uint8(decoded), None
+    except ValueError as exc:
+        return None, f"cannot read image {name}: {exc}"
+
+
+class FrameSource(ABC):
+    """An iterable of :class:`visloc.types.Frame`; also a context manager that closes it.
+
+    ``len(source)`` is the number of frames when it is known in advance (image lists, videos
+    whose container states a frame count); otherwise it raises ``TypeError`` as a generator
+    does. ``description`` is a one-line summary for logs and progress bars.
+    """
+
+    description: str
+
+    def __init__(self, description: str) -> None:
+        self.description = description
+        self._closed = False
+
+    @property
+    def closed(self) -> bool:
+        """Whether :meth:`close` has been called."""
+        return self._closed
+
+    def __iter__(self) -> Iterator[Frame]:
+        if self._closed:
+            raise ValueError(f"cannot iterate a closed frame source ({self.description})")
+        return self._frames()
+
+    @abstractmethod
+    def _frames(self) -> Iterator[Frame]:
+        """Yield the frames (called by ``__iter__`` on an open source)."""
+
+    def _length(self) -> int | None:
+        """Number of frames, or ``None`` when unknown."""
+        return None
+
+    def __len__(self) -> int:
+        n = self._length()
+        if n is None:
+            raise TypeError(f"object of type '{type(self).__name__}' has no len()")
+        return n
+
+    def close(self) -> None:
+        """Release the underlying resources; iterating afterwards raises ``ValueError``."""
+        self._closed = True
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__}: {self.description}>"
+
+
+class ImageListSource(FrameSource):
+    """Frames from a list of image files, read lazily in the given order.
+
+    ``time`` is ``index / fps`` when ``fps`` is given, else ``index`` (i.e. one second per
+    frame, so that ``time`` is always defined and monotonic). An unreadable file yields a frame
+    with ``image=None`` and ``error`` set; iteration goes on. The source can be iterated
+    several times.
+
+    Parameters
+    ----------
+    paths : sequence of str
+        Image files.
+    fps : float, optional
+        Frame rate used for ``time``.
+    description : str, optional
+        Summary; defaults to ``"<n> images"``.
+    """
+
+    def __init__(
+        self, paths: Sequence[str], *, fps: float | None = None, description: str | None = None
+    ) -> None:
+        self.paths: list[str] = [os.fspath(p) for p in paths]
+        self.fps = _check_fps(fps)
+        super().__init__(description or f"{len(self.paths)} images")
+
+    def _length(self) -> int:
+        return len(self.paths)
+
+    def _frames(self) -> Iterator[Frame]:
+        for index, path in enumerate(self.paths):
+            if self._closed:
+                return
+            image, error = read_image(path)
+            t = index / self.fps if self.fps is not None else float(index)
+            yield Frame(index, t, image, path, error)
+
+
+class VideoSource(FrameSource):
+    """Frames of a video file read with ``cv2.VideoCapture``.
+
+    ``time`` is the stream timestamp (``CAP_PROP_POS_MSEC`` after each read) in seconds. If
+    ``fps`` is given it overrides the container and ``time = index / fps``; if the backend
+    reports no usable timestamps, ``index / CAP_PROP_FPS`` is used. Iteration stops at the first
+    frame the decoder cannot deliver (end of stream or a corrupt tail). Each new iteration
+    starts again from the first frame.
+
+    Parameters
+    ----------
+    path : str
+        Video file.
+    fps : float, optional
+        Frame rate overriding the container's timestamps.
+
+    Raises
+    ------
+    SourceError
+        If OpenCV cannot open the video.
+    """
+
+    def __init__(self, path: str | os.PathLike[str], *, fps: float | None = None) -> None:
+        self.path = os.fspath(path)
+        self.fps = _check_fps(fps)
+        self._capture = self._open()
+        self._fresh = True
+        count = int(self._capture.get(cv2.CAP_PROP_FRAME_COUNT))
+        self.frame_count: int | None = count if count > 0 else None
+        native = self._capture.get(cv2.CAP_PROP_FPS)
+        self.native_fps: float | None = native if math.isfinite(native) and native > 0 else None
+        parts = [f"{count} frames"] if self.frame_count else []
+        if self.native_fps:
+            parts.append(f"{self.native_fps:g} fps")
+        extra = f" ({', '.join(parts)})" if parts else ""
+        super().__init__(f"video {self.path}{extra}")
+
+    def _open(self) -> cv2.VideoCapture:
+        capture = cv2.VideoCapture(self.path)
+        if not capture.isOpened():
+            capture.release()
+            raise SourceError(f"cannot open video {self.path}")
+        return capture
+
+    def _length(self) -> int | None:
+        return self.frame_count
+
+    def _frames(self) -> Iterator[Frame]:
+        if not self._fresh:
+            self._capture.release()
+            self._capture = self._open()
+        self._fresh = False
+        capture = self._capture
+        index = 0
+        last_time = -math.inf
+        use_stamps = self.fps is None
+        while not self._closed:
+            ok, image = capture.read()
+            if not ok or image is None:
+                return
+            stamp = capture.get(cv2.CAP_PROP_POS_MSEC) / 1000.0
+            if use_stamps and (not math.isfinite(stamp) or stamp < 0 or stamp <= last_time):
+                use_stamps = False  # backend without usable timestamps: fall back to index / fps
+            if use_stamps:
+                t = stamp
+            else:
+                rate = self.fps or self.native_fps
+                t = index / rate if rate else float(index)
+            last_time = t
+            yield Frame(index, t, _to_uint8(image), f"{self.path}#{index}")
+            index += 1
+
+    def close(self) -> None:
+        """Release the capture."""
+        self._capture.release()
+        super().close()
+
+
+class CameraSource(FrameSource):
+    """Live frames from a camera opened with ``cv2.VideoCapture(index)``.
+
+    ``time`` is the wall-clock time (monotonic clock) since the first frame of the iteration.
+    Iteration stops when the camera stops delivering frames or the source is closed; the
+    length is unknown (``len()`` raises ``TypeError``).
+
+    Parameters
+    ----------
+    index : int
+        Camera index (0 is the default camera).
+
+    Raises
+    ------
+    SourceError
+        If the camera cannot be opened.
+    """
+
+    def __init__(self, index: int) -> None:
+        self.index = int(index)
+        self._capture = cv2.VideoCapture(self.index)
+        if not self._capture.isOpened():
+            self._capture.release()
+            raise SourceError(f"cannot open camera {self.index}")
+        super().__init__(f"camera {self.index}")
+
+    def _frames(self) -> Iterator[Frame]:
+        start: float | None = None
+        index = 0
+        while not self._closed:
+            ok, image = self._capture.read()
+            now = _time.monotonic()
+            if not ok or image is None:
+                return
+            if start is None:
+                start = now
+            yield Frame(index, now - start, _to_uint8(image), f"camera{self.index}#{index}")
+            index += 1
+
+    def close(self) -> None:
+        """Release the camera."""
+        self._capture.release()
+        super().close()
+
+
+def _image_list(spec: str, paths: list[str], kind: str, fps: float | None) -> ImageListSource:
+    images = sorted(p for p in paths if _is_image_path(p) and os.path.isfile(p))
+    if not images:
+        found = "matches" if kind == "glob" else "contains"
+        raise SourceError(f"{kind} {spec} {found} no image file")
+    noun = "image" if len(images) == 1 else "images"
+    return ImageListSource(images, fps=fps, description=f"{kind} {spec} ({len(images)} {noun})")
+
+
+def open_source(spec: str | int | os.PathLike[str], *, fps: float | None = None) -> FrameSource:
+    """Open a frame source from a path, glob pattern, video file or camera index.
+
+    ``spec`` is interpreted in this order:
+
+    1. an ``int``, or a string of digits such as ``"0"``: a camera index (write ``"./0"`` for
+       a file or folder named ``0``);
+    2. an existing folder: its image files (non-recursive), sorted by name;
+    3. an existing file: a single image if its extension is an image extension
+       (:data:`IMAGE_EXTENSIONS`, case-insensitive), otherwise a video (any other extension
+       is tried with ``cv2.VideoCapture`` too);
+    4. a string containing ``*``, ``?`` or ``[``: a glob pattern (``**`` recurses), keeping the
+       matching image files sorted by path.
+
+    Parameters
+    ----------
+    spec : str, int or os.PathLike
+        What to read, as above.
+    fps : float, optional
+        Frame rate. For image lists ``time = index / fps``; without it ``time = index`` (one
+        second per frame). For videos it overrides the container's timestamps. Cameras ignore
+        it (their time is the wall-clock time since the first frame).
+
+    Returns
+    -------
+    FrameSource
+        Iterable of :class:`visloc.types.Frame`; use it as a context manager to release
+        videos and cameras.
+
+    Raises
+    ------
+    SourceError
+        If the path does not exist, a folder or glob holds no image file, or a video or camera
+        cannot be opened. The one-line message names ``spec``.
+    TypeError
+        If ``spec`` or ``fps`` has the wrong type.
+    ValueError
+        If ``fps`` is not positive and finite.
+    """
+    fps = _check_fps(fps)
+    if isinstance(spec, bool) or not isinstance(spec, (str, int, os.PathLike)):
+        raise TypeError(f"spec must be a path, glob pattern or camera index, got {spec!r}")
+    if isinstance(spec, int):
+        if spec < 0:
+            raise SourceError(f"camera index must be >= 0, got {spec}")
+        return CameraSource(spec)
+    text = os.fspath(spec)
+    if not isinstance(text, str):
+        raise TypeError(f"spec must be a str path, got {type(text).__name__}")
+    if not text.strip():
+        raise SourceError("spec is empty: expected a path, glob pattern or camera index")
+    if text.strip().isdigit() and text.strip().isascii():
+        return CameraSource(int(text.strip()))
+    if os.path.isdir(text):
+        names = [os.path.join(text, n) for n in os.listdir(text)]
+        return _image_list(text, names, "folder", fps)
+    if os.path.isfile(text):
+        if _is_image_path(text):
+            return ImageListSource([text], fps=fps, description=f"image {text}")
+        ext = os.path.splitext(text)[1].lower()
+        try:
+            return VideoSource(text, fps=fps)
+        except SourceError:
+            if ext in VIDEO_EXTENSIONS:
+                raise
+            raise SourceError(
+                f"cannot open {text}: not an image or a readable video (extension {ext or 'none'})"
+            ) from None
+    if _GLOB_CHARS & set(text):
+        return _image_list(text, glob.glob(text, recursive=True), "glob", fps)
+    raise SourceError(f"path does not exist: {text}")

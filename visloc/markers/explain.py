@@ -1,0 +1,165 @@
+"""Pictures of every detector stage, so a user can see why a marker was missed.
+
+The panels follow the report's Figure G.1: B binary image, C contours, D radial distance
+profiles with their peaks, E side groups, F fitted corners, G sampled bits, I detections.
+Each candidate also gets a line in ``<stem>_candidates.json`` naming the stage it stopped at.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from visloc.markers.detector import CandidateTrace, DetectionTrace
+
+__all__ = ["explain_panels", "write_explain"]
+
+_STAGE_COLOURS = {
+    "corners": (128, 128, 128),
+    "bits": (0, 140, 255),
+    "dictionary": (0, 215, 255),
+    "refine": (255, 0, 255),
+    "duplicate": (255, 128, 0),
+    "accepted": (0, 200, 0),
+}
+_SIDE_COLOURS = [(0, 0, 255), (0, 200, 0), (255, 0, 0), (0, 200, 255)]
+
+
+def _bgr(gray: NDArray[np.uint8]) -> NDArray[np.uint8]:
+    return cv2.cvtColor(gray, cv2.COLOR_GRAY2BGR)
+
+
+def _poly(img: NDArray, pts: NDArray, colour, closed: bool = True, thickness: int = 1) -> None:
+    p = np.round(np.asarray(pts, np.float64) * 16).astype(np.int32).reshape(-1, 1, 2)
+    cv2.polylines(img, [p], closed, colour, thickness, cv2.LINE_AA, shift=4)
+
+
+def _radial_plot(c: CandidateTrace, width: int = 320, height: int = 120) -> NDArray[np.uint8]:
+    """Panel D for one candidate: distance to the centre (grey), smoothed (blue), peaks (red)."""
+    img = np.full((height, width, 3), 255, np.uint8)
+    s = c.split
+    if s is None:
+        cv2.putText(img, "no 4 peaks", (10, 60), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 200), 1)
+        return img
+    n = len(s.distance)
+    lo, hi = float(s.distance.min()), float(s.distance.max()) + 1e-9
+    x = np.linspace(5, width - 5, n)
+
+    def y(v):
+        return height - 10 - (v - lo) / (hi - lo) * (height - 20)
+
+    _poly(img, np.stack([x, y(s.distance)], 1), (160, 160, 160), closed=False)
+    _poly(img, np.stack([x, y(s.smoothed)], 1), (200, 80, 0), closed=False)
+    for p in s.peaks:
+        cv2.circle(img, (int(x[p]), int(y(s.smoothed[p]))), 4, (0, 0, 255), -1)
+    return img
+
+
+def _bits_tile(c: CandidateTrace, size: int = 96) -> NDArray[np.uint8]:
+    """Panel G for one candidate: the cell means as a picture, ring included."""
+    img = np.full((size, size, 3), 255, np.uint8)
+    if c.cells is None:
+        return img
+    cells = c.cells.cells[0]
+    n = cells.shape[0]
+    tile = cv2.resize(np.clip(cells, 0, 255).astype(np.uint8), (size - 16, size - 16), interpolation=cv2.INTER_NEAREST)
+    img[8:-8, 8:-8] = _bgr(tile)
+    step = (size - 16) / n
+    for k in range(n + 1):
+        v = int(round(8 + k * step))
+        cv2.line(img, (8, v), (size - 9, v), (0, 0, 255), 1)
+        cv2.line(img, (v, 8), (v, size - 9), (0, 0, 255), 1)
+    cv2.rectangle(img, (0, 0), (size - 1, size - 1), _STAGE_COLOURS[c.stage], 3)
+    return img
+
+
+def _tiles(tiles: list[NDArray[np.uint8]], per_row: int) -> NDArray[np.uint8]:
+    if not tiles:
+        return np.full((40, 320, 3), 255, np.uint8)
+    h, w = tiles[0].shape[:2]
+    rows = (len(tiles) + per_row - 1) // per_row
+    out = np.full((rows * h, per_row * w, 3), 255, np.uint8)
+    for i, t in enumerate(tiles):
+        r, c = divmod(i, per_row)
+        out[r * h : (r + 1) * h, c * w : (c + 1) * w] = t
+    return out
+
+
+def explain_panels(trace: DetectionTrace, max_candidates: int = 48) -> dict[str, NDArray[np.uint8]]:
+    """Panels B-I of report Figure G.1 as BGR images, keyed by file suffix."""
+    cands = trace.candidates[:max_candidates]
+    panels: dict[str, NDArray[np.uint8]] = {"B_binary": _bgr(trace.binary)}
+
+    c_img = _bgr(trace.blurred // 2 + 64)
+    for contour in trace.contours:
+        _poly(c_img, contour, (0, 160, 255))
+    for c in cands:
+        _poly(c_img, c.contour, _STAGE_COLOURS[c.stage], thickness=2)
+    panels["C_contours"] = c_img
+
+    panels["D_radial"] = _tiles([_radial_plot(c) for c in cands], per_row=3)
+
+    e_img = _bgr(trace.gray)
+    f_img = _bgr(trace.gray)
+    for c in cands:
+        if c.split is None:
+            continue
+        pts = c.contour.astype(np.float64)
+        for k, g in enumerate(c.split.groups):
+            for p in pts[g]:
+                cv2.circle(e_img, (int(p[0]), int(p[1])), 1, _SIDE_COLOURS[k], -1)
+        if c.line_corners is not None:
+            _poly(f_img, c.line_corners, _STAGE_COLOURS[c.stage])
+            for p in c.line_corners:
+                cv2.drawMarker(f_img, (int(round(p[0])), int(round(p[1]))), (0, 0, 255), cv2.MARKER_CROSS, 7)
+    panels["E_groups"] = e_img
+    panels["F_corners"] = f_img
+    panels["G_bits"] = _tiles([_bits_tile(c) for c in cands if c.cells is not None], per_row=8)
+
+    i_img = _bgr(trace.gray)
+    for d in trace.detections:
+        _poly(i_img, d.corners, (0, 200, 0), thickness=2)
+        p0 = d.corners[0]
+        cv2.circle(i_img, (int(round(p0[0])), int(round(p0[1]))), 4, (0, 0, 255), -1)
+        cx, cy = d.center
+        cv2.putText(i_img, str(d.id), (int(cx) - 8, int(cy) + 5), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 0, 0), 2)
+    panels["I_detections"] = i_img
+    return panels
+
+
+def write_explain(trace: DetectionTrace, outdir: str | Path, stem: str = "frame") -> list[Path]:
+    """Write the panels as ``<outdir>/<stem>_<panel>.png`` and a ``<stem>_candidates.json``
+    listing every candidate's bounding box, the stage it stopped at, and its id if decoded.
+
+    Returns the written paths.
+    """
+    out = Path(outdir)
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    for name, img in explain_panels(trace).items():
+        p = out / f"{stem}_{name}.png"
+        if not cv2.imwrite(str(p), img):
+            raise OSError(f"cannot write {p}")
+        written.append(p)
+    rows = []
+    for c in trace.candidates:
+        x, y, w, h = cv2.boundingRect(c.contour.reshape(-1, 1, 2))
+        row = {"bbox": [x, y, w, h], "stage": c.stage}
+        if c.detection is not None:
+            row["id"] = c.detection.id
+        if c.bits is not None:
+            row["bits"] = c.bits.astype(int).tolist()
+        rows.append(row)
+    summary = {
+        "contours": len(trace.contours),
+        "candidates": rows,
+        "detections": [d.to_dict() for d in trace.detections],
+    }
+    p = out / f"{stem}_candidates.json"
+    p.write_text(json.dumps(summary, indent=1))
+    written.append(p)
+    return written

@@ -36,7 +36,7 @@ def test_filter_keeps_squares_and_rejects_other_shapes():
     cv2.fillPoly(b, [np.array([[120, 120], [200, 120], [200, 190], [160, 150], [120, 190]])], 255)
     cands = filter_candidates(find_contours(b), b.shape)
     assert len(cands) == 1
-    contour, quad = cands[0]
+    _contour, quad = cands[0]
     assert quad.shape == (4, 2)
     assert quad[:, 0].min() < 35 and quad[:, 1].max() > 75
 

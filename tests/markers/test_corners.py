@@ -57,7 +57,7 @@ def test_orient_clockwise():
 def test_radial_peaks_pick_the_four_corners_of_a_square_profile():
     corners = np.array([[10, 10], [50, 10], [50, 50], [10, 50]], float)
     pts = np.concatenate([np.linspace(corners[k], corners[(k + 1) % 4], 40, endpoint=False) for k in range(4)])
-    center, dist, smooth = radial_profile(pts)
+    center, _dist, smooth = radial_profile(pts)
     assert np.allclose(center, [30, 30])
     peaks = radial_peaks(smooth)
     assert np.array_equal(peaks, [0, 40, 80, 120])

@@ -3,4 +3,4 @@
 from visloc.markers.detector import DetectionTrace, DetectorParams, MarkerDetector
 from visloc.markers.dictionary import Dictionary, load_dictionary
 
-__all__ = ["MarkerDetector", "DetectorParams", "DetectionTrace", "Dictionary", "load_dictionary"]
+__all__ = ["DetectionTrace", "DetectorParams", "Dictionary", "MarkerDetector", "load_dictionary"]

@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 
 from visloc.images import as_gray
 
-__all__ = ["to_gray", "blur", "threshold", "default_window"]
+__all__ = ["blur", "default_window", "threshold", "to_gray"]
 
 
 def to_gray(image: NDArray[np.uint8]) -> NDArray[np.uint8]:
@@ -36,7 +36,7 @@ def blur(gray: NDArray[np.uint8], sigma: float = 0.8) -> NDArray[np.uint8]:
 
 def default_window(shape: tuple[int, ...]) -> int:
     """Adaptive-threshold window for an image of ``shape``: about 1/40 of the short side, odd, >= 7."""
-    w = max(7, int(round(min(shape[:2]) / 40.0)))
+    w = max(7, round(min(shape[:2]) / 40.0))
     return w | 1
 
 

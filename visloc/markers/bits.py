@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 from visloc.markers.dictionary import Dictionary
 
-__all__ = ["CellSample", "square_to_quad", "sample_cells", "otsu_threshold", "read_bits", "decode"]
+__all__ = ["CellSample", "decode", "otsu_threshold", "read_bits", "sample_cells", "square_to_quad"]
 
 _SUB = np.array([0.3, 0.5, 0.7])  # sub-sample positions inside a cell, in cell units
 

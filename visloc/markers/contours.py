@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 _NEXT = np.array([1, 2, 3, 0])
 
-__all__ = ["find_contours", "filter_candidates", "CandidateFilter"]
+__all__ = ["CandidateFilter", "filter_candidates", "find_contours"]
 
 
 def find_contours(binary: NDArray[np.uint8]) -> list[NDArray[np.int32]]:
@@ -44,11 +44,14 @@ class CandidateFilter:
         Contour length bounds as fractions of the image's larger side (OpenCV's 0.03 and 4.0).
     approx_rate : float
         Polygon approximation tolerance as a fraction of the perimeter; the contour must
-        simplify to exactly four vertices.
+        simplify to exactly four vertices (at this tolerance, or at twice it when the first
+        try gives five to eight: a blob of noise touching a marker's border adds a spur).
     min_side : float
         Shortest allowed side of that quadrilateral, px.
     min_solidity : float
         Contour area over its convex hull's area; squares seen in perspective are ~1.
+    min_compactness : float
+        Lower bound of ``16 * area / perimeter^2`` (1 for a square, 0.89 for a 2:1 rectangle).
     border_distance : float
         Vertices closer than this to the image border reject the candidate (its true corner
         may lie outside the image).
@@ -59,7 +62,22 @@ class CandidateFilter:
     approx_rate: float = 0.05
     min_side: float = 6.0
     min_solidity: float = 0.85
+    min_compactness: float = 0.45
     border_distance: float = 2.0
+
+
+def _on_sides(contour: NDArray, quad: NDArray, tol: float) -> float:
+    """Fraction of contour points within ``tol`` px of the closed polygon ``quad``'s sides."""
+    p = contour.astype(np.float64)
+    q = quad.astype(np.float64)
+    best = np.full(len(p), np.inf)
+    for k in range(len(q)):
+        a, b = q[k], q[(k + 1) % len(q)]
+        ab = b - a
+        t = np.clip(((p - a) @ ab) / max(ab @ ab, 1e-12), 0.0, 1.0)
+        d = p - (a + t[:, None] * ab)
+        best = np.minimum(best, (d * d).sum(axis=1))
+    return float((best <= tol * tol).mean())
 
 
 def filter_candidates(
@@ -70,8 +88,8 @@ def filter_candidates(
     """Stage 5: keep contours that may be the outer border of a square marker.
 
     Tests, cheapest first: contour length within the perimeter bounds relative to the image
-    size; a four-vertex convex polygon approximation (convexity); every side at least
-    ``min_side``; solidity; no vertex near the image border.
+    size; area and compactness; a four-vertex convex polygon approximation (convexity);
+    every side at least ``min_side``; no vertex near the image border; solidity.
 
     Returns
     -------
@@ -85,23 +103,35 @@ def filter_candidates(
     lengths = np.fromiter((len(c) for c in contours), np.int64, len(contours))
     keep = np.flatnonzero((lengths >= lo) & (lengths <= hi))
     bd = params.border_distance
+    min_area = params.min_side**2
     out = []
     for i in keep:
         c = contours[i]
-        approx = cv2.approxPolyDP(c, params.approx_rate * len(c), True)
-        if len(approx) != 4:
+        n = len(c)
+        area = cv2.contourArea(c)
+        # compactness 16 A / n^2: ~1-1.6 for squares traced 8-connected, ~0 for lines and
+        # ragged texture blobs; a cheap reject before the polygon approximation
+        if area < min_area or 16.0 * area < params.min_compactness * n * n:
+            continue
+        approx = cv2.approxPolyDP(c, params.approx_rate * n, True)
+        hull = -1.0
+        if 4 < len(approx) <= 8:  # a small spur (noise touching the border): look coarser,
+            hull = cv2.contourArea(cv2.convexHull(c))
+            if area < params.min_solidity * hull:
+                continue
+            approx = cv2.approxPolyDP(c, 2 * params.approx_rate * n, True)
+            if len(approx) == 4 and _on_sides(c, approx.reshape(4, 2), 0.02 * n + 1.0) < 0.8:
+                continue  # ... but most of the contour must still lie on the quad's sides
+        if len(approx) != 4 or not cv2.isContourConvex(approx):
             continue
         q = approx.reshape(4, 2)
-        if not cv2.isContourConvex(q):
-            continue
         d = q[_NEXT] - q
-        sides = np.sqrt((d * d).sum(axis=1))
-        if sides.min() < params.min_side:
+        if (d * d).sum(axis=1).min() < params.min_side**2:
             continue
-        if q.min() < bd or (q[:, 0] > w - 1 - bd).any() or (q[:, 1] > h - 1 - bd).any():
+        if q.min() < bd or q[:, 0].max() > w - 1 - bd or q[:, 1].max() > h - 1 - bd:
             continue
-        area = cv2.contourArea(c)
-        hull = cv2.contourArea(cv2.convexHull(c))
+        if hull < 0:
+            hull = cv2.contourArea(cv2.convexHull(c))
         if hull <= 0 or area / hull < params.min_solidity:
             continue
         out.append((c, q))

@@ -22,15 +22,15 @@ _PREV = np.array([3, 0, 1, 2])
 
 __all__ = [
     "RadialSplit",
-    "radial_profile",
-    "radial_peaks",
-    "split_sides",
     "fit_line",
     "fit_lines",
-    "intersect_lines",
-    "quad_from_lines",
     "fit_quad",
+    "intersect_lines",
     "orient_clockwise",
+    "quad_from_lines",
+    "radial_peaks",
+    "radial_profile",
+    "split_sides",
 ]
 
 
@@ -90,7 +90,7 @@ def radial_peaks(smoothed: NDArray, count: int = 4, min_prominence: float | None
     Maxima closer than ``N / 16`` points to a higher one are merged; of the rest, the
     ``count`` with the largest prominence (height above the higher of the two valleys that
     separate the peak from its neighbouring peaks) are kept. Returns ``None`` when fewer than
-    ``count`` maxima rise at least ``min_prominence`` (default: 2 % of the mean + 0.25).
+    ``count`` maxima rise at least ``min_prominence`` (default: 1 % of the mean + 0.1).
     """
     d = np.asarray(smoothed, np.float64)
     n = len(d)
@@ -112,7 +112,7 @@ def radial_peaks(smoothed: NDArray, count: int = 4, min_prominence: float | None
     rolled = np.concatenate([d[start:], d[:start]])
     valley = np.minimum.reduceat(rolled, ch - start)  # segment k: peak k .. peak k+1
     prom = d[ch] - np.maximum(valley, np.concatenate([valley[-1:], valley[:-1]]))
-    floor = 0.02 * d.mean() + 0.25 if min_prominence is None else min_prominence
+    floor = 0.01 * d.mean() + 0.1 if min_prominence is None else min_prominence
     strong = prom >= floor
     if strong.sum() < count:
         return None
@@ -208,6 +208,17 @@ def orient_clockwise(quad: NDArray) -> NDArray:
     return quad if area2 > 0 else quad[[0, 3, 2, 1]]
 
 
+def _oblique(quad: NDArray) -> bool:
+    """True for a quad (4, 2) seen so obliquely that its radial profile may lack a corner
+    peak: an interior angle above 120 degrees, or sides differing by more than 2.5 times."""
+    a = quad[_PREV] - quad
+    b = quad[_NEXT] - quad
+    la = np.hypot(a[:, 0], a[:, 1])
+    lb = np.hypot(b[:, 0], b[:, 1])
+    cos = (a * b).sum(axis=1) / np.maximum(la * lb, 1e-12)
+    return bool(cos.min() < -0.5 or lb.max() > 2.5 * max(lb.min(), 1e-12))
+
+
 def fit_quad(
     contour: NDArray, *, sigma: float | None = None, padding: float = 0.1, hint: NDArray | None = None
 ) -> tuple[NDArray[np.float64], RadialSplit] | None:
@@ -223,7 +234,10 @@ def fit_quad(
         See :func:`radial_profile` and :func:`split_sides`.
     hint : ndarray (4, 2), optional
         Approximate corners (e.g. a polygon approximation) used when the radial profile
-        has fewer than four significant peaks (a very oblique view can hide a corner's peak).
+        has fewer than four significant peaks and either the contour is short (under 100
+        points, where pixel steps rival the corners' prominence) or the hint is oblique (an
+        interior angle above 120 degrees or sides differing by more than 2.5 times: such
+        views can hide a corner's peak).
 
     Returns
     -------
@@ -235,8 +249,8 @@ def fit_quad(
     center, dist, smooth = radial_profile(pts, sigma)
     peaks = radial_peaks(smooth)
     if peaks is None:
-        if hint is None:
-            return None
+        if hint is None or (len(pts) >= 100 and not _oblique(np.asarray(hint, np.float64))):
+            return None  # a large regular quad would have shown four peaks: not a clean quad
         h = np.asarray(hint, np.float64)
         peaks = np.sort(np.argmin(((pts[None, :, :] - h[:, None, :]) ** 2).sum(-1), axis=1))
         if len(np.unique(peaks)) < 4:

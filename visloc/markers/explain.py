@@ -70,7 +70,7 @@ def _bits_tile(c: CandidateTrace, size: int = 96) -> NDArray[np.uint8]:
     img[8:-8, 8:-8] = _bgr(tile)
     step = (size - 16) / n
     for k in range(n + 1):
-        v = int(round(8 + k * step))
+        v = round(8 + k * step)
         cv2.line(img, (8, v), (size - 9, v), (0, 0, 255), 1)
         cv2.line(img, (v, 8), (v, size - 9), (0, 0, 255), 1)
     cv2.rectangle(img, (0, 0), (size - 1, size - 1), _STAGE_COLOURS[c.stage], 3)
@@ -115,7 +115,7 @@ def explain_panels(trace: DetectionTrace, max_candidates: int = 48) -> dict[str,
         if c.line_corners is not None:
             _poly(f_img, c.line_corners, _STAGE_COLOURS[c.stage])
             for p in c.line_corners:
-                cv2.drawMarker(f_img, (int(round(p[0])), int(round(p[1]))), (0, 0, 255), cv2.MARKER_CROSS, 7)
+                cv2.drawMarker(f_img, (round(p[0]), round(p[1])), (0, 0, 255), cv2.MARKER_CROSS, 7)
     panels["E_groups"] = e_img
     panels["F_corners"] = f_img
     panels["G_bits"] = _tiles([_bits_tile(c) for c in cands if c.cells is not None], per_row=8)
@@ -124,7 +124,7 @@ def explain_panels(trace: DetectionTrace, max_candidates: int = 48) -> dict[str,
     for d in trace.detections:
         _poly(i_img, d.corners, (0, 200, 0), thickness=2)
         p0 = d.corners[0]
-        cv2.circle(i_img, (int(round(p0[0])), int(round(p0[1]))), 4, (0, 0, 255), -1)
+        cv2.circle(i_img, (round(p0[0]), round(p0[1])), 4, (0, 0, 255), -1)
         cx, cy = d.center
         cv2.putText(i_img, str(d.id), (int(cx) - 8, int(cy) + 5), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 0, 0), 2)
     panels["I_detections"] = i_img

@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 from visloc.markers.corners import _NEXT, fit_lines, quad_from_lines
 
-__all__ = ["sample_edge_profiles", "edge_offsets", "refine_quads"]
+__all__ = ["edge_offsets", "refine_quads", "sample_edge_profiles"]
 
 
 def sample_edge_profiles(
@@ -78,7 +78,12 @@ def edge_offsets(profiles: NDArray, black: NDArray | float, white: NDArray | flo
 
 
 def refine_quads(
-    gray: NDArray[np.uint8], quads: NDArray, *, radius: int = 2, iterations: int = 2, count: int = 24
+    gray: NDArray[np.uint8],
+    quads: NDArray,
+    *,
+    radius: int | NDArray = 2,
+    iterations: int = 2,
+    count: int = 24,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """Refine the corners of dark squares on a bright surround to sub-pixel accuracy.
 
@@ -88,9 +93,9 @@ def refine_quads(
         The grey image (not the binary one).
     quads : ndarray (K, 4, 2)
         Initial corners, clockwise in the image, within about ``radius`` px of the truth.
-    radius : int
-        Half-width of the sampled profiles, px. It should not exceed the marker's cell size
-        (beyond it the interior bits start) nor its white margin.
+    radius : int or ndarray (K,) of int
+        Half-width of the sampled profiles, px, for all quads or per quad. It should not
+        exceed the marker's cell size (beyond it the interior bits start) nor its margin.
     iterations : int
         Passes; each re-centres the profiles on the previous pass's lines.
     count : int
@@ -105,22 +110,36 @@ def refine_quads(
     """
     q = np.asarray(quads, np.float64).reshape(-1, 4, 2).copy()
     k = len(q)
+    r = np.broadcast_to(np.asarray(radius, np.int64), (k,))
+    if k == 0:
+        return q, np.ones(0, bool)
+    if (r < 1).any():
+        raise ValueError(f"radius must be >= 1, got {radius}")
+    big = int(r.max())
+    s = np.abs(np.arange(-big, big + 1))
+    inside = (s[None, :] <= r[:, None])[:, None, None, :]  # (K, 1, 1, 2R+1)
+    i_in = (big - r)[:, None, None, None]
+    i_out = (big + r)[:, None, None, None]
+    r4 = r[:, None, None].astype(np.float64)
     ok_all = np.ones(k, bool)
     for _ in range(iterations):
-        base, normals, prof = sample_edge_profiles(gray, q, radius, count)
+        base, normals, prof = sample_edge_profiles(gray, q, big, count)
+        p_in = np.take_along_axis(prof, np.broadcast_to(i_in, prof.shape[:3] + (1,)), axis=3)[..., 0]
+        p_out = np.take_along_axis(prof, np.broadcast_to(i_out, prof.shape[:3] + (1,)), axis=3)[..., 0]
         half = 2 * count  # median of the 4 * count inner (outer) end samples of each quad
-        lo = np.partition(prof[..., 0].reshape(k, -1), half, axis=1)[:, half]
-        hi = np.partition(prof[..., -1].reshape(k, -1), half, axis=1)[:, half]
-        e = edge_offsets(prof, lo[:, None, None], hi[:, None, None])
+        lo = np.partition(p_in.reshape(k, -1), half, axis=1)[:, half]
+        hi = np.partition(p_out.reshape(k, -1), half, axis=1)[:, half]
+        span = np.maximum(hi - lo, 1e-6)[:, None, None, None]
+        v = np.clip((prof - lo[:, None, None, None]) / span, 0.0, 1.0) * inside
+        e = r4 + 0.5 - v.sum(axis=-1)  # module docstring: area of the normalised step
         # profiles that did not cross a clean step (occlusion, neighbouring edge) are outliers
-        step = prof[..., -1] - prof[..., 0]
-        good = (step > 0.5 * (hi - lo)[:, None, None]) & (np.abs(e) < radius)
+        good = ((p_out - p_in) > 0.5 * (hi - lo)[:, None, None]) & (np.abs(e) < r4)
         pts = (base + e[..., None] * normals[:, :, None, :]).reshape(k * 4, count, 2)
         w = good.reshape(k * 4, count).astype(np.float64)
         lines = fit_lines(pts, w)
-        r = np.abs(pts[..., 0] * lines[:, 0:1] + pts[..., 1] * lines[:, 1:2] - lines[:, 2:3])
-        rms = np.sqrt((w * r * r).sum(axis=1) / np.maximum(w.sum(axis=1), 1))
-        w2 = w * (r < 2.5 * rms[:, None] + 0.05)
+        res = np.abs(pts[..., 0] * lines[:, 0:1] + pts[..., 1] * lines[:, 1:2] - lines[:, 2:3])
+        rms = np.sqrt((w * res * res).sum(axis=1) / np.maximum(w.sum(axis=1), 1))
+        w2 = w * (res < 2.5 * rms[:, None] + 0.05)
         lines = fit_lines(pts, np.where(w2.sum(axis=1, keepdims=True) >= 3, w2, w))
         lines = lines.reshape(k, 4, 3)
         flip = (lines[..., :2] * normals).sum(axis=-1) < 0
@@ -130,7 +149,7 @@ def refine_quads(
             (hi - lo < 4.0)
             | (w.reshape(k, 4, count).sum(axis=2) < 3).any(axis=1)
             | ~np.isfinite(new).all(axis=(1, 2))
-            | (np.abs(np.nan_to_num(new - q, nan=1e9)).max(axis=(1, 2)) > 2.0 * radius + 1)
+            | (np.abs(np.nan_to_num(new - q, nan=1e9)).max(axis=(1, 2)) > 2.0 * r + 1)
         )
         ok_all &= ~bad
         q = np.where(ok_all[:, None, None], new, q)

@@ -85,6 +85,9 @@ class MarkerDetection:
         found away from the first corner of the contour; informational.
     contrast : float
         White level minus black level of the marker in grey levels.
+    refined : bool
+        Whether the corners come from the grey-level edge refinement (stage 8); False when
+        it failed (occluded or cluttered sides) and the contour line fits were kept.
     """
 
     id: int
@@ -93,6 +96,7 @@ class MarkerDetection:
     margin: float = 1.0
     rotation: int = 0
     contrast: float = 0.0
+    refined: bool = True
 
     @property
     def center(self) -> FloatArray:
@@ -114,6 +118,7 @@ class MarkerDetection:
             "corners": [[round(float(x), 4), round(float(y), 4)] for x, y in self.corners],
             "hamming": int(self.hamming),
             "margin": round(float(self.margin), 4),
+            "refined": bool(self.refined),
         }
 
 

@@ -80,7 +80,7 @@ def test_fit_quad_finds_corners_of_a_rotated_square_within_half_a_pixel(angle):
     truth = c + np.array([[-25, -25], [25, -25], [25, 25], [-25, 25.0]]) @ rot.T
     img = render_square((120, 100), truth, blur=0.6)
     cs = find_contours(threshold(img, window=11, offset=7))
-    contour = max(cs, key=len)
+    contour = max(cs, key=len).reshape(-1, 2)
     quad, split = fit_quad(contour)
     # match up to a cyclic shift
     best = min(np.abs(np.roll(quad, k, axis=0) - truth).max() for k in range(4))
@@ -92,7 +92,7 @@ def test_fit_quad_uses_the_hint_when_a_peak_is_missing():
     # a strongly foreshortened quad whose obtuse corners barely peak
     truth = np.array([[20, 40], [100, 38], [104, 52], [16, 54.0]])
     img = render_square((120, 100), truth)
-    contour = max(find_contours(threshold(img, window=11, offset=7)), key=len)
+    contour = max(find_contours(threshold(img, window=11, offset=7)), key=len).reshape(-1, 2)
     hint = cv2.approxPolyDP(contour, 0.05 * len(contour), True).reshape(-1, 2)
     res = fit_quad(contour, hint=hint)
     assert res is not None

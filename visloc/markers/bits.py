@@ -94,6 +94,8 @@ def sample_cells(gray: NDArray[np.uint8], quads: NDArray, n: int) -> CellSample:
         Cells per side including the black border (bits per side + 2).
     """
     q = np.asarray(quads, np.float64).reshape(-1, 4, 2)
+    if len(q) == 0:
+        return CellSample(np.zeros((0, n, n)), np.zeros((0, 4 * n + 4)))
     if n not in _GRIDS:
         _GRIDS[n] = _unit_grid(n)
     uv = _GRIDS[n]

@@ -22,8 +22,9 @@ __all__ = ["CandidateFilter", "filter_candidates", "find_contours"]
 def find_contours(binary: NDArray[np.uint8]) -> list[NDArray[np.int32]]:
     """Stage 4: outer borders of the ink (255) regions of a binary image.
 
-    Returns a list of ``(N, 2)`` int32 arrays of ``(x, y)`` pixel centres, each a closed
-    8-connected border traced in order. Holes (inner borders) are left out.
+    Returns a list of ``(N, 1, 2)`` int32 arrays (OpenCV's layout) of ``(x, y)`` pixel
+    centres, each a closed 8-connected border traced in order. Holes (inner borders) are
+    left out.
     """
     if binary.ndim != 2 or binary.dtype != np.uint8:
         raise ValueError(f"binary must be a (H, W) uint8 image, got {binary.shape} {binary.dtype}")
@@ -31,7 +32,7 @@ def find_contours(binary: NDArray[np.uint8]) -> list[NDArray[np.int32]]:
     if hierarchy is None:
         return []
     outer = np.flatnonzero(hierarchy[0, :, 3] < 0)
-    return [contours[i].reshape(-1, 2) for i in outer]
+    return [contours[i] for i in outer]
 
 
 @dataclass(frozen=True)
@@ -67,17 +68,13 @@ class CandidateFilter:
 
 
 def _on_sides(contour: NDArray, quad: NDArray, tol: float) -> float:
-    """Fraction of contour points within ``tol`` px of the closed polygon ``quad``'s sides."""
-    p = contour.astype(np.float64)
-    q = quad.astype(np.float64)
-    best = np.full(len(p), np.inf)
-    for k in range(len(q)):
-        a, b = q[k], q[(k + 1) % len(q)]
-        ab = b - a
-        t = np.clip(((p - a) @ ab) / max(ab @ ab, 1e-12), 0.0, 1.0)
-        d = p - (a + t[:, None] * ab)
-        best = np.minimum(best, (d * d).sum(axis=1))
-    return float((best <= tol * tol).mean())
+    """Fraction of contour points (N, 2) within ``tol`` px of the closed quad's (4, 2) sides."""
+    p = contour.astype(np.float64)[:, None, :]  # (N, 1, 2)
+    a = quad.astype(np.float64)
+    ab = a[_NEXT] - a  # (4, 2)
+    t = np.clip(((p - a) * ab).sum(axis=2) / np.maximum((ab * ab).sum(axis=1), 1e-12), 0.0, 1.0)
+    d = p - (a + t[..., None] * ab)
+    return float(((d * d).sum(axis=2).min(axis=1) <= tol * tol).mean())
 
 
 def filter_candidates(
@@ -94,16 +91,18 @@ def filter_candidates(
     Returns
     -------
     list of (contour, quad)
-        The surviving contours with the vertices (4, 2) of their approximating polygon.
+        The surviving contours as (N, 2) arrays with the vertices (4, 2) of their
+        approximating polygon.
     """
     h, w = image_shape[:2]
     size = max(h, w)
-    lo = max(params.min_perimeter_rate * size, 4 * params.min_side)
+    lo = max(params.min_perimeter_rate * size, 2.8 * params.min_side)  # 8-connected: >= 2 sqrt(2) side
     hi = params.max_perimeter_rate * size
-    lengths = np.fromiter((len(c) for c in contours), np.int64, len(contours))
+    lengths = np.array(list(map(len, contours)), np.int64)
     keep = np.flatnonzero((lengths >= lo) & (lengths <= hi))
     bd = params.border_distance
     min_area = params.min_side**2
+    min_side2 = params.min_side**2
     out = []
     for i in keep:
         c = contours[i]
@@ -120,19 +119,25 @@ def filter_candidates(
             if area < params.min_solidity * hull:
                 continue
             approx = cv2.approxPolyDP(c, 2 * params.approx_rate * n, True)
-            if len(approx) == 4 and _on_sides(c, approx.reshape(4, 2), 0.02 * n + 1.0) < 0.8:
+            if len(approx) == 4 and _on_sides(c.reshape(-1, 2), approx.reshape(4, 2), 0.02 * n + 1.0) < 0.8:
                 continue  # ... but most of the contour must still lie on the quad's sides
         if len(approx) != 4 or not cv2.isContourConvex(approx):
             continue
-        q = approx.reshape(4, 2)
-        d = q[_NEXT] - q
-        if (d * d).sum(axis=1).min() < params.min_side**2:
+        (x0, y0), (x1, y1), (x2, y2), (x3, y3) = approx.reshape(4, 2).tolist()
+        if min(
+            (x1 - x0) ** 2 + (y1 - y0) ** 2,
+            (x2 - x1) ** 2 + (y2 - y1) ** 2,
+            (x3 - x2) ** 2 + (y3 - y2) ** 2,
+            (x0 - x3) ** 2 + (y0 - y3) ** 2,
+        ) < min_side2:
             continue
-        if q.min() < bd or q[:, 0].max() > w - 1 - bd or q[:, 1].max() > h - 1 - bd:
+        if min(x0, x1, x2, x3) < bd or min(y0, y1, y2, y3) < bd:
+            continue
+        if max(x0, x1, x2, x3) > w - 1 - bd or max(y0, y1, y2, y3) > h - 1 - bd:
             continue
         if hull < 0:
             hull = cv2.contourArea(cv2.convexHull(c))
         if hull <= 0 or area / hull < params.min_solidity:
             continue
-        out.append((c, q))
+        out.append((c.reshape(-1, 2), approx.reshape(4, 2)))
     return out

@@ -208,17 +208,6 @@ def orient_clockwise(quad: NDArray) -> NDArray:
     return quad if area2 > 0 else quad[[0, 3, 2, 1]]
 
 
-def _oblique(quad: NDArray) -> bool:
-    """True for a quad (4, 2) seen so obliquely that its radial profile may lack a corner
-    peak: an interior angle above 120 degrees, or sides differing by more than 2.5 times."""
-    a = quad[_PREV] - quad
-    b = quad[_NEXT] - quad
-    la = np.hypot(a[:, 0], a[:, 1])
-    lb = np.hypot(b[:, 0], b[:, 1])
-    cos = (a * b).sum(axis=1) / np.maximum(la * lb, 1e-12)
-    return bool(cos.min() < -0.5 or lb.max() > 2.5 * max(lb.min(), 1e-12))
-
-
 def fit_quad(
     contour: NDArray, *, sigma: float | None = None, padding: float = 0.1, hint: NDArray | None = None
 ) -> tuple[NDArray[np.float64], RadialSplit] | None:
@@ -234,10 +223,9 @@ def fit_quad(
         See :func:`radial_profile` and :func:`split_sides`.
     hint : ndarray (4, 2), optional
         Approximate corners (e.g. a polygon approximation) used when the radial profile
-        has fewer than four significant peaks and either the contour is short (under 100
-        points, where pixel steps rival the corners' prominence) or the hint is oblique (an
-        interior angle above 120 degrees or sides differing by more than 2.5 times: such
-        views can hide a corner's peak).
+        has fewer than four significant peaks: an obtuse corner seen obliquely shows as a
+        shoulder, not a peak, and on short contours pixel steps rival the corners'
+        prominence.
 
     Returns
     -------
@@ -249,8 +237,8 @@ def fit_quad(
     center, dist, smooth = radial_profile(pts, sigma)
     peaks = radial_peaks(smooth)
     if peaks is None:
-        if hint is None or (len(pts) >= 100 and not _oblique(np.asarray(hint, np.float64))):
-            return None  # a large regular quad would have shown four peaks: not a clean quad
+        if hint is None:
+            return None
         h = np.asarray(hint, np.float64)
         peaks = np.sort(np.argmin(((pts[None, :, :] - h[:, None, :]) ** 2).sum(-1), axis=1))
         if len(np.unique(peaks)) < 4:

@@ -1,10 +1,19 @@
 """``MarkerDetector``: the report's staged square-marker detector (Appendix G, Figure G.1).
 
-One frame's path: grey (1) -> blur (2) -> adaptive threshold (3) -> outer contours (4) ->
-candidate filter (5) -> radial-peak corner split (6) -> line fits (7) -> bit sampling and
-border check (9) -> dictionary match (10) -> sub-pixel edge refinement on the grey image (8)
--> duplicate merge. Edge refinement, the costliest step per candidate, runs after decoding so
-that only real markers pay for it.
+One frame's path:
+
+1. grey; then, per search pass (an image scale and a threshold window):
+   2. Gaussian blur, 3. adaptive threshold, 4. outer contours, 5. candidate filter,
+   6. radial-peak corner split, 7. line fits -> candidate quads in full-resolution pixels;
+8. sub-pixel edge refinement of all candidates on the full-resolution grey image (batched;
+   candidates whose cells show no black border or no contrast are dropped first, cheaply);
+9. bit sampling with a per-marker threshold and the black-border check (batched);
+10. dictionary match in four orientations, corners rotated so corner 0 is the marker's own
+    top-left; duplicates (one marker found twice) merged.
+
+Several passes combine what one threshold window cannot do alone: a fine window at full
+resolution closes the thin borders of small or oblique markers, a coarse window on a shrunk
+image closes the borders of large, blurred ones, at a quarter of the cost.
 """
 
 from __future__ import annotations
@@ -18,12 +27,30 @@ from numpy.typing import NDArray
 from visloc.markers.binarize import blur, default_window, threshold, to_gray
 from visloc.markers.bits import CellSample, decode, read_bits, sample_cells
 from visloc.markers.contours import CandidateFilter, filter_candidates, find_contours
-from visloc.markers.corners import _NEXT, RadialSplit, fit_quad
+from visloc.markers.corners import _NEXT, RadialSplit, fit_quad, orient_clockwise
 from visloc.markers.dictionary import Dictionary, load_dictionary
 from visloc.markers.refine import refine_quads
 from visloc.types import MarkerDetection
 
-__all__ = ["CandidateTrace", "DetectionTrace", "DetectorParams", "MarkerDetector"]
+__all__ = ["CandidateTrace", "DetectionTrace", "DetectorParams", "MarkerDetector", "PassTrace", "SearchPass"]
+
+
+@dataclass(frozen=True)
+class SearchPass:
+    """One candidate search (stages 2-7).
+
+    Attributes
+    ----------
+    scale : float
+        The image is shrunk by this factor (>= 1, times the base scale, see
+        :class:`DetectorParams`) before blurring and thresholding.
+    window : int or None
+        Adaptive-threshold window in pixels of the shrunk image (odd, >= 3); ``None`` picks
+        :func:`visloc.markers.binarize.default_window` of the shrunk image.
+    """
+
+    scale: float = 1.0
+    window: int | None = None
 
 
 @dataclass(frozen=True)
@@ -32,16 +59,14 @@ class DetectorParams:
 
     Attributes
     ----------
-    decimate : float or None
-        Stages 2-7 (the candidate search) run on the image shrunk by this factor; stages 8-10
-        always use the full-resolution grey image. ``None``: shrink so the short side is
-        ``search_height`` pixels (never enlarge).
-    search_height : int
-        See ``decimate``. At 320, markers of 3.5 % of the image height or more are found.
+    passes : tuple of SearchPass
+        Candidate searches, in order; a candidate an earlier pass proposed already is
+        skipped. Their scales are relative to the base scale.
+    base_height : int
+        Images whose short side exceeds this are searched at the base scale
+        ``short side / base_height`` (stages 8-10 always use full resolution).
     blur_sigma : float
-        Stage 2 Gaussian blur, px.
-    window : int or None
-        Stage 3 adaptive-threshold window (odd, px); ``None`` = 1/40 of the image's short side.
+        Stage 2 Gaussian blur, px of the searched image.
     offset : float
         Stage 3 threshold offset, grey levels.
     candidates : CandidateFilter
@@ -62,10 +87,9 @@ class DetectorParams:
         Stage 10: fraction of the dictionary's correction capacity used (OpenCV: 0.6).
     """
 
-    decimate: float | None = None
-    search_height: int = 320
+    passes: tuple[SearchPass, ...] = (SearchPass(1.0, 9), SearchPass(2.0, 9))
+    base_height: int = 540
     blur_sigma: float = 0.8
-    window: int | None = None
     offset: float = 7.0
     candidates: CandidateFilter = field(default_factory=CandidateFilter)
     corner_sigma: float | None = None
@@ -81,11 +105,13 @@ class DetectorParams:
 class CandidateTrace:
     """What happened to one candidate contour (for ``--explain``).
 
-    ``stage`` is where it stopped: ``"corners"``, ``"bits"``, ``"dictionary"``, ``"refine"``,
-    ``"duplicate"`` or ``"accepted"``.
+    ``contour`` is in the pixels of its pass's image (``scale``); ``line_corners`` in
+    full-resolution pixels. ``stage`` is where it stopped: ``"corners"``, ``"bits"``,
+    ``"dictionary"``, ``"duplicate"`` or ``"accepted"``.
     """
 
     contour: NDArray[np.int32]
+    scale: float
     split: RadialSplit | None
     line_corners: NDArray[np.float64] | None
     cells: CellSample | None
@@ -95,15 +121,42 @@ class CandidateTrace:
 
 
 @dataclass(frozen=True, eq=False)
+class PassTrace:
+    """Stages 2-4 of one search pass."""
+
+    scale: float
+    window: int
+    blurred: NDArray[np.uint8]
+    binary: NDArray[np.uint8]
+    contours: list[NDArray[np.int32]]
+
+
+@dataclass(frozen=True, eq=False)
 class DetectionTrace:
     """Every stage's intermediate result for one image (report Figure G.1, panels B-I)."""
 
     gray: NDArray[np.uint8]
-    blurred: NDArray[np.uint8]
-    binary: NDArray[np.uint8]
-    contours: list[NDArray[np.int32]]
+    passes: list[PassTrace]
     candidates: list[CandidateTrace]
     detections: list[MarkerDetection]
+
+    @property
+    def binary(self) -> NDArray[np.uint8]:
+        """The first pass's binary image."""
+        return self.passes[0].binary
+
+
+@dataclass
+class _Cands:
+    """Candidates pooled from the search passes (parallel lists)."""
+
+    quads: list[NDArray[np.float64]] = field(default_factory=list)
+    contours: list[NDArray[np.int32]] = field(default_factory=list)
+    scales: list[float] = field(default_factory=list)
+    splits: list[RadialSplit] = field(default_factory=list)
+
+    def subset(self, idx: NDArray[np.intp]) -> _Cands:
+        return _Cands(*([lst[i] for i in idx] for lst in (self.quads, self.contours, self.scales, self.splits)))
 
 
 class MarkerDetector:
@@ -115,7 +168,8 @@ class MarkerDetector:
         An OpenCV predefined name (``"DICT_4X4_50"``, ``"DICT_APRILTAG_36h11"``, ...) or the
         path of an OpenCV dictionary YAML file.
     **params
-        Fields of :class:`DetectorParams` (e.g. ``window=15``, ``refine=False``).
+        Fields of :class:`DetectorParams` (e.g. ``offset=5``, ``refine=False``);
+        ``passes`` may be given as ``[(scale, window), ...]``.
 
     Examples
     --------
@@ -130,6 +184,8 @@ class MarkerDetector:
         unknown = set(params) - names
         if unknown:
             raise TypeError(f"unknown detector parameter(s): {', '.join(sorted(unknown))}")
+        if "passes" in params:
+            params["passes"] = tuple(_as_pass(p) for p in params["passes"])  # type: ignore[union-attr]
         self.params = replace(DetectorParams(), **params)  # type: ignore[arg-type]
 
     def __repr__(self) -> str:
@@ -141,88 +197,96 @@ class MarkerDetector:
 
     def trace(self, image: NDArray[np.uint8]) -> DetectionTrace:
         """Run :meth:`detect` keeping every stage's intermediate result."""
-        log: dict = {"candidates": []}
+        log: dict = {"candidates": [], "passes": []}
         dets = self._run(image, log)
-        return DetectionTrace(
-            log["gray"], log["blurred"], log["binary"], log["contours"], log["candidates"], dets
-        )
+        return DetectionTrace(log["gray"], log["passes"], log["candidates"], dets)
 
-    def _decimation(self, shape: tuple[int, ...]) -> float:
-        """Factor by which stages 2-7 shrink the image (1 = full resolution)."""
-        d = self.params.decimate
-        if d is None:
-            return max(1.0, min(shape[:2]) / self.params.search_height)
-        return float(d)
+    def _propose(self, gray: NDArray[np.uint8], sp: SearchPass, base: float, log: dict | None):
+        """Stages 2-5 of one pass: candidate contours, their scale to full resolution, and
+        their polygon corners (K, 4, 2) in full-resolution pixels."""
+        p = self.params
+        work = gray
+        f = sp.scale * base
+        if f > 1:
+            size = (max(2, round(gray.shape[1] / f)), max(2, round(gray.shape[0] / f)))
+            work = cv2.resize(gray, size, interpolation=cv2.INTER_AREA)
+        scale = np.array([gray.shape[1] / work.shape[1], gray.shape[0] / work.shape[0]])
+        blurred = blur(work, p.blur_sigma)  # stage 2
+        window = sp.window if sp.window is not None else default_window(work.shape)
+        binary = threshold(blurred, window=window, offset=p.offset)  # stage 3
+        contours = find_contours(binary)  # stage 4
+        if log is not None:
+            log["passes"].append(PassTrace(float(scale[0]), window, blurred, binary, contours))
+        # a marker needs at least about 1 px per cell to be decoded: smaller ones are not looked at
+        n_cells = self.dictionary.marker_size + 2
+        bounds = replace(p.candidates, min_side=max(p.candidates.min_side, n_cells / scale.max()))
+        found = filter_candidates(contours, work.shape, bounds)  # stage 5
+        approx = np.array([orient_clockwise(q.astype(np.float64)) for _, q in found]).reshape(-1, 4, 2)
+        return [c for c, _ in found], scale, (approx + 0.5) * scale - 0.5
 
     def _run(self, image: NDArray[np.uint8], log: dict | None) -> list[MarkerDetection]:
         p = self.params
         gray = to_gray(image)  # stage 1
-        f = self._decimation(gray.shape)
-        work = gray
-        if f > 1:
-            size = (round(gray.shape[1] / f), round(gray.shape[0] / f))
-            work = cv2.resize(gray, size, interpolation=cv2.INTER_AREA)
-        scale = np.array([gray.shape[1] / work.shape[1], gray.shape[0] / work.shape[0]])
-        blurred = blur(work, p.blur_sigma)  # stage 2
-        window = p.window if p.window is not None else default_window(work.shape)
-        binary = threshold(blurred, window=window, offset=p.offset)  # stage 3
-        contours = find_contours(binary)  # stage 4
-        cands = filter_candidates(contours, work.shape, p.candidates)  # stage 5
         if log is not None:
-            log.update(gray=gray, blurred=blurred, binary=binary, contours=contours)
-        quads, splits, kept = [], [], []
-        for contour, approx in cands:  # stages 6-7, one contour at a time
-            res = fit_quad(contour, sigma=p.corner_sigma, padding=p.corner_padding, hint=approx)
-            if res is None:
-                _note(log, contour, None, None, None, None, None, "corners")
-                continue
-            quads.append(res[0])
-            splits.append(res[1])
-            kept.append(contour)
-        if not quads:
-            return []
-        quads_a = (np.array(quads) + 0.5) * scale - 0.5  # back to full-resolution pixel centres
+            log["gray"] = gray
+        base = max(1.0, min(gray.shape[:2]) / p.base_height)
         n_cells = self.dictionary.marker_size + 2
-        # cheap, lenient look at the cells first: most texture candidates end here, before
-        # they cost an edge refinement
-        pre = read_bits(sample_cells(gray, quads_a, n_cells), 0.5)[0]
-        if not pre.any():
-            for i in range(len(quads_a)):
-                _note(log, kept[i], splits[i], quads_a[i], None, None, None, "bits")
+        cands = _Cands()
+        seen = np.zeros((0, 4, 2))
+        for sp in p.passes:
+            contours, scale, approx = self._propose(gray, sp, base, log)
+            if not contours:
+                continue
+            # a candidate an earlier pass already proposed costs nothing more
+            fresh = _distinct(np.concatenate([seen, approx]))
+            fresh = fresh[fresh >= len(seen)] - len(seen)
+            seen = np.concatenate([seen, approx[fresh]])
+            if not len(fresh):
+                continue
+            # a cheap, lenient look at the cells through the polygon corners: most texture
+            # candidates end here, before they cost a corner fit and an edge refinement
+            looks = read_bits(sample_cells(gray, approx[fresh], n_cells), 0.5)[0]
+            for i, ok in zip(fresh, looks, strict=True):
+                contour = contours[i]
+                if not ok:
+                    _note(log, contour, float(scale[0]), None, None, None, None, None, "bits")
+                    continue
+                hint = (approx[i] + 0.5) / scale - 0.5
+                res = fit_quad(contour, sigma=p.corner_sigma, padding=p.corner_padding, hint=hint)  # 6-7
+                if res is None:
+                    _note(log, contour, float(scale[0]), None, None, None, None, None, "corners")
+                    continue
+                cands.quads.append((res[0] + 0.5) * scale - 0.5)  # to full-resolution pixel centres
+                cands.contours.append(contour)
+                cands.scales.append(float(scale[0]))
+                cands.splits.append(res[1])
+        if not cands.quads:
             return []
-        if not pre.all():
-            for i in np.flatnonzero(~pre):
-                _note(log, kept[i], splits[i], quads_a[i], None, None, None, "bits")
-            sel = np.flatnonzero(pre)
-            quads_a = quads_a[sel]
-            kept = [kept[i] for i in sel]
-            splits = [splits[i] for i in sel]
-        corners = quads_a
-        refined_ok = np.ones(len(quads_a), bool)
+        cands = cands.subset(_distinct(np.array(cands.quads)))
+        quads = np.array(cands.quads)
+        n_cells = self.dictionary.marker_size + 2
+        corners, refined = quads, np.zeros(len(quads), bool)
         if p.refine:  # stage 8, batched
-            side = np.sqrt(np.abs(_areas(quads_a)))
-            radii = np.full(len(quads_a), p.refine_radius or 0)
-            if not p.refine_radius:
-                radii = np.clip(np.round(0.4 * side / n_cells), 1, 3).astype(int)
-            corners, refined_ok = refine_quads(gray, quads_a, radius=radii, iterations=p.refine_iterations)
+            side = np.sqrt(np.abs(_areas(quads)))
+            radii = p.refine_radius or np.clip(np.round(0.4 * side / n_cells), 1, 3).astype(int)
+            corners, refined = refine_quads(gray, quads, radius=radii, iterations=p.refine_iterations)
         cells = sample_cells(gray, corners, n_cells)  # stage 9, batched
         valid, bits, margin, contrast = read_bits(cells, p.border_error_rate)
         ids, shift, hamming, matched = decode(bits, self.dictionary, p.error_correction_rate)  # 10
-        good = refined_ok & valid & matched
         found: list[tuple[MarkerDetection, float]] = []
-        for i in range(len(quads_a)):
-            if not good[i]:
-                if log is not None:
-                    stage = "refine" if not refined_ok[i] else "bits" if not valid[i] else "dictionary"
-                    b = bits[i] if valid[i] else None
-                    _note(log, kept[i], splits[i], quads_a[i], _cells_at(cells, i), b, None, stage)
+        for i in range(len(quads)):
+            cell_i = CellSample(cells.cells[i : i + 1], cells.ring[i : i + 1]) if log is not None else None
+            if not (valid[i] and matched[i]):
+                stage, b = ("bits", None) if not valid[i] else ("dictionary", bits[i])
+                _note(log, cands.contours[i], cands.scales[i], cands.splits[i], quads[i], cell_i, b, None, stage)
                 continue
             c = np.roll(corners[i], -int(shift[i]), axis=0)
             det = MarkerDetection(
-                int(ids[i]), c, int(hamming[i]), float(margin[i]), int(shift[i]), float(contrast[i])
+                int(ids[i]), c, int(hamming[i]), float(margin[i]), int(shift[i]), float(contrast[i]),
+                bool(refined[i]),
             )
-            found.append((det, abs(_area(c))))
-            _note(log, kept[i], splits[i], quads_a[i], _cells_at(cells, i), bits[i], det, "accepted")
+            found.append((det, abs(float(_areas(c)))))
+            _note(log, cands.contours[i], cands.scales[i], cands.splits[i], quads[i], cell_i, bits[i], det, "accepted")
         dets = _merge_duplicates(found)
         if log is not None and len(dets) < len(found):
             kept_ids = {id(d) for d in dets}
@@ -232,22 +296,41 @@ class MarkerDetector:
         return dets
 
 
-def _cells_at(cells: CellSample, i: int) -> CellSample:
-    return CellSample(cells.cells[i : i + 1], cells.ring[i : i + 1])
+def _as_pass(p: object) -> SearchPass:
+    if isinstance(p, SearchPass):
+        return p
+    scale, window = p  # type: ignore[misc]
+    if not scale >= 1:
+        raise ValueError(f"passes: scale must be >= 1, got {scale}")
+    return SearchPass(float(scale), None if window is None else int(window))
+
+
+def _note(log: dict | None, contour, scale, split, quad, cells, bits, det, stage: str) -> None:
+    if log is not None:
+        log["candidates"].append(CandidateTrace(contour, scale, split, quad, cells, bits, det, stage))
 
 
 def _areas(q: NDArray) -> NDArray:
+    """Signed areas of quads (..., 4, 2); positive for clockwise quads in y-down images."""
     x, y = q[..., 0], q[..., 1]
     return 0.5 * ((x * y[..., _NEXT]).sum(-1) - (x[..., _NEXT] * y).sum(-1))
 
 
-def _note(log: dict | None, contour, split, quad, cells, bits, det, stage: str) -> None:
-    if log is not None:
-        log["candidates"].append(CandidateTrace(contour, split, quad, cells, bits, det, stage))
-
-
-def _area(q: NDArray) -> float:
-    return float(_areas(q))
+def _distinct(quads: NDArray) -> NDArray[np.intp]:
+    """Indices of the quads (K, 4, 2) to keep when several passes found the same one: a quad
+    whose corners all lie within 15 % of its side of an earlier quad's is dropped."""
+    k = len(quads)
+    if k < 2:
+        return np.arange(k)
+    side = np.sqrt(np.abs(_areas(quads)))
+    # corner distance for the 4 cyclic alignments; quads are clockwise, starting anywhere
+    best = np.full((k, k), np.inf)
+    for s in range(4):
+        d = np.linalg.norm(quads[:, None, :, :] - np.roll(quads, s, axis=1)[None, :, :, :], axis=3).max(axis=2)
+        best = np.minimum(best, d)
+    same = best < 0.15 * np.minimum(side[:, None], side[None, :])
+    keep = [i for i in range(k) if not same[i, :i].any()]
+    return np.array(keep, np.intp)
 
 
 def _merge_duplicates(found: list[tuple[MarkerDetection, float]]) -> list[MarkerDetection]:

@@ -22,7 +22,6 @@ _STAGE_COLOURS = {
     "corners": (128, 128, 128),
     "bits": (0, 140, 255),
     "dictionary": (0, 215, 255),
-    "refine": (255, 0, 255),
     "duplicate": (255, 128, 0),
     "accepted": (0, 200, 0),
 }
@@ -36,6 +35,11 @@ def _bgr(gray: NDArray[np.uint8]) -> NDArray[np.uint8]:
 def _poly(img: NDArray, pts: NDArray, colour, closed: bool = True, thickness: int = 1) -> None:
     p = np.round(np.asarray(pts, np.float64) * 16).astype(np.int32).reshape(-1, 1, 2)
     cv2.polylines(img, [p], closed, colour, thickness, cv2.LINE_AA, shift=4)
+
+
+def _full(contour: NDArray, scale: float) -> NDArray[np.float64]:
+    """Contour points of a pass image in full-resolution pixel coordinates."""
+    return (contour.astype(np.float64) + 0.5) * scale - 0.5
 
 
 def _radial_plot(c: CandidateTrace, width: int = 320, height: int = 120) -> NDArray[np.uint8]:
@@ -92,13 +96,14 @@ def _tiles(tiles: list[NDArray[np.uint8]], per_row: int) -> NDArray[np.uint8]:
 def explain_panels(trace: DetectionTrace, max_candidates: int = 48) -> dict[str, NDArray[np.uint8]]:
     """Panels B-I of report Figure G.1 as BGR images, keyed by file suffix."""
     cands = trace.candidates[:max_candidates]
-    panels: dict[str, NDArray[np.uint8]] = {"B_binary": _bgr(trace.binary)}
-
-    c_img = _bgr(trace.blurred // 2 + 64)
-    for contour in trace.contours:
-        _poly(c_img, contour, (0, 160, 255))
+    panels: dict[str, NDArray[np.uint8]] = {}
+    c_img = _bgr(trace.gray // 2 + 64)
+    for k, ps in enumerate(trace.passes):
+        panels[f"B_binary_pass{k}"] = _bgr(ps.binary)
+        for contour in ps.contours:
+            _poly(c_img, _full(contour, ps.scale), (0, 160, 255))
     for c in cands:
-        _poly(c_img, c.contour, _STAGE_COLOURS[c.stage], thickness=2)
+        _poly(c_img, _full(c.contour, c.scale), _STAGE_COLOURS[c.stage], thickness=2)
     panels["C_contours"] = c_img
 
     panels["D_radial"] = _tiles([_radial_plot(c) for c in cands], per_row=3)
@@ -108,7 +113,7 @@ def explain_panels(trace: DetectionTrace, max_candidates: int = 48) -> dict[str,
     for c in cands:
         if c.split is None:
             continue
-        pts = c.contour.astype(np.float64)
+        pts = _full(c.contour, c.scale)
         for k, g in enumerate(c.split.groups):
             for p in pts[g]:
                 cv2.circle(e_img, (int(p[0]), int(p[1])), 1, _SIDE_COLOURS[k], -1)
@@ -147,15 +152,16 @@ def write_explain(trace: DetectionTrace, outdir: str | Path, stem: str = "frame"
         written.append(p)
     rows = []
     for c in trace.candidates:
-        x, y, w, h = cv2.boundingRect(c.contour.reshape(-1, 1, 2))
-        row = {"bbox": [x, y, w, h], "stage": c.stage}
+        full = _full(c.contour, c.scale)
+        lo, hi = full.min(axis=0), full.max(axis=0)
+        row = {"bbox": [round(float(v), 1) for v in (*lo, *(hi - lo))], "pass_scale": c.scale, "stage": c.stage}
         if c.detection is not None:
             row["id"] = c.detection.id
         if c.bits is not None:
             row["bits"] = c.bits.astype(int).tolist()
         rows.append(row)
     summary = {
-        "contours": len(trace.contours),
+        "passes": [{"scale": ps.scale, "window": ps.window, "contours": len(ps.contours)} for ps in trace.passes],
         "candidates": rows,
         "detections": [d.to_dict() for d in trace.detections],
     }

@@ -108,7 +108,8 @@ def refine_quads(
     ok : ndarray (K,) bool
         False where a side had too little contrast or too few clean profiles.
     """
-    q = np.asarray(quads, np.float64).reshape(-1, 4, 2).copy()
+    q0 = np.asarray(quads, np.float64).reshape(-1, 4, 2)
+    q = q0.copy()
     k = len(q)
     r = np.broadcast_to(np.asarray(radius, np.int64), (k,))
     if k == 0:
@@ -116,41 +117,38 @@ def refine_quads(
     if (r < 1).any():
         raise ValueError(f"radius must be >= 1, got {radius}")
     big = int(r.max())
-    s = np.abs(np.arange(-big, big + 1))
-    inside = (s[None, :] <= r[:, None])[:, None, None, :]  # (K, 1, 1, 2R+1)
-    i_in = (big - r)[:, None, None, None]
-    i_out = (big + r)[:, None, None, None]
+    inside = (np.abs(np.arange(-big, big + 1))[None, :] <= r[:, None])[:, None, None, :]
+    kk = np.arange(k)
     r4 = r[:, None, None].astype(np.float64)
+    max_move = 2.0 * r + 1
     ok_all = np.ones(k, bool)
-    for _ in range(iterations):
+    half = 2 * count  # median of the 4 * count inner (outer) end samples of each quad
+    for it in range(iterations):
         base, normals, prof = sample_edge_profiles(gray, q, big, count)
-        p_in = np.take_along_axis(prof, np.broadcast_to(i_in, prof.shape[:3] + (1,)), axis=3)[..., 0]
-        p_out = np.take_along_axis(prof, np.broadcast_to(i_out, prof.shape[:3] + (1,)), axis=3)[..., 0]
-        half = 2 * count  # median of the 4 * count inner (outer) end samples of each quad
+        p_in = prof[kk, :, :, big - r]  # (K, 4, M): each quad's innermost sample
+        p_out = prof[kk, :, :, big + r]
         lo = np.partition(p_in.reshape(k, -1), half, axis=1)[:, half]
         hi = np.partition(p_out.reshape(k, -1), half, axis=1)[:, half]
         span = np.maximum(hi - lo, 1e-6)[:, None, None, None]
-        v = np.clip((prof - lo[:, None, None, None]) / span, 0.0, 1.0) * inside
-        e = r4 + 0.5 - v.sum(axis=-1)  # module docstring: area of the normalised step
+        v = np.clip((prof - lo[:, None, None, None]) / span, 0.0, 1.0)
+        e = r4 + 0.5 - (v * inside).sum(axis=-1)  # module docstring: area of the normalised step
         # profiles that did not cross a clean step (occlusion, neighbouring edge) are outliers
         good = ((p_out - p_in) > 0.5 * (hi - lo)[:, None, None]) & (np.abs(e) < r4)
         pts = (base + e[..., None] * normals[:, :, None, :]).reshape(k * 4, count, 2)
         w = good.reshape(k * 4, count).astype(np.float64)
         lines = fit_lines(pts, w)
-        res = np.abs(pts[..., 0] * lines[:, 0:1] + pts[..., 1] * lines[:, 1:2] - lines[:, 2:3])
-        rms = np.sqrt((w * res * res).sum(axis=1) / np.maximum(w.sum(axis=1), 1))
-        w2 = w * (res < 2.5 * rms[:, None] + 0.05)
-        lines = fit_lines(pts, np.where(w2.sum(axis=1, keepdims=True) >= 3, w2, w))
+        if it == iterations - 1:  # last pass: drop outliers of the first fit and fit again
+            res = np.abs(pts[..., 0] * lines[:, 0:1] + pts[..., 1] * lines[:, 1:2] - lines[:, 2:3])
+            rms = np.sqrt((w * res * res).sum(axis=1) / np.maximum(w.sum(axis=1), 1))
+            w2 = w * (res < 2.5 * rms[:, None] + 0.05)
+            lines = fit_lines(pts, np.where(w2.sum(axis=1, keepdims=True) >= 3, w2, w))
         lines = lines.reshape(k, 4, 3)
         flip = (lines[..., :2] * normals).sum(axis=-1) < 0
         lines[flip] *= -1
         new = quad_from_lines(lines)
-        bad = (
-            (hi - lo < 4.0)
-            | (w.reshape(k, 4, count).sum(axis=2) < 3).any(axis=1)
-            | ~np.isfinite(new).all(axis=(1, 2))
-            | (np.abs(np.nan_to_num(new - q, nan=1e9)).max(axis=(1, 2)) > 2.0 * r + 1)
-        )
-        ok_all &= ~bad
-        q = np.where(ok_all[:, None, None], new, q)
+        move = np.abs(new - q).max(axis=(1, 2))  # NaN where two sides came out parallel
+        ok_all &= (hi - lo >= 4.0) & (w.reshape(k, 4, count).sum(axis=2) >= 3).all(axis=1)
+        ok_all &= move <= max_move  # False for NaN too
+        q[ok_all] = new[ok_all]
+    q[~ok_all] = q0[~ok_all]
     return q, ok_all

@@ -1,0 +1,321 @@
+"""Marker benchmark: visloc vs OpenCV ArUco (+ solvePnP IPPE_SQUARE) vs AprilTag 3, one run.
+
+Same rendered frames for every detector, at 320x240, 640x480 and 1280x720: easy, hard (blur,
+motion blur, noise, dim light, JPEG), small markers, and empty frames; plus the real
+photographs in ``datasets/real`` and marker-free real photos (scikit-image's data set).
+Timing is interleaved (every frame: each detector in turn, several rounds) and reported as
+medians per frame and ratios to OpenCV's default detector.
+
+Usage::
+
+    python bench/markers.py [--quick] [--rounds 3] [--out bench/results]
+
+Writes ``markers.json`` and ``markers.md`` (the table the README shows).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from visloc.markers import MarkerDetector
+from visloc.pose import Camera, estimate_marker_pose, rotation_angle
+from visloc.synth import MARKER_LENGTH, random_scene
+
+ROOT = Path(__file__).resolve().parents[1]
+SIZES = [(320, 240), (640, 480), (1280, 720)]
+SETS = {"easy": 30, "hard": 40, "small": 30, "empty": 15}
+FLIP_DEG = 10.0  # a pose whose rotation error exceeds this took the wrong planar solution
+
+
+def opencv_detector(dict_name: str | None, subpix: bool, dictionary=None) -> cv2.aruco.ArucoDetector:
+    d = dictionary if dictionary is not None else cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dict_name))
+    p = cv2.aruco.DetectorParameters()
+    if subpix:
+        p.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+    return cv2.aruco.ArucoDetector(d, p)
+
+
+def make_methods(dict_name: str, with_apriltag: bool) -> dict:
+    """name -> function(gray image) -> list of (id, corners (4, 2) in OpenCV order and pixel convention)."""
+    vl = MarkerDetector(dict_name)
+    cv_default = opencv_detector(dict_name, False)
+    cv_subpix = opencv_detector(dict_name, True)
+
+    def run_cv(det):
+        def f(img):
+            corners, ids, _ = det.detectMarkers(img)
+            return [] if ids is None else [(int(i), c.reshape(4, 2).astype(np.float64)) for c, i in zip(corners, ids.ravel())]
+        return f
+
+    methods = {
+        "visloc": lambda img: [(d.id, d.corners) for d in vl.detect(img)],
+        "opencv": run_cv(cv_default),
+        "opencv_subpix": run_cv(cv_subpix),
+    }
+    if with_apriltag:
+        import pupil_apriltags
+
+        at = pupil_apriltags.Detector(families="tag36h11", nthreads=2, quad_decimate=2.0)
+
+        def run_at(img):
+            # AprilTag 3 order to OpenCV order, and its pixel centres sit at +0.5
+            return [(int(d.tag_id), d.corners[[1, 0, 3, 2]] - 0.5) for d in at.detect(img)]
+
+        methods["apriltag3"] = run_at
+    return methods
+
+
+def match(dets, truth):
+    """Pairs (det corners, truth marker) by id and position; the rest are false positives."""
+    pairs, fp = [], 0
+    used = set()
+    for mid, c in dets:
+        best = None
+        for k, m in enumerate(truth):
+            if k in used or m.id != mid:
+                continue
+            if np.abs(c.mean(axis=0) - m.corners.mean(axis=0)).max() < 0.25 * np.sqrt(abs(cv2.contourArea(m.corners.astype(np.float32)))) + 2:
+                best = k
+                break
+        if best is None:
+            fp += 1
+        else:
+            used.add(best)
+            pairs.append((c, truth[best]))
+    return pairs, fp
+
+
+def corner_alignment(c, gt):
+    """Corner errors (4,) for the best cyclic alignment (AprilTag's order is converted, but
+    a detector reporting a rotated order would otherwise count as a huge error)."""
+    return np.sqrt(((c - gt) ** 2).sum(axis=1))
+
+
+def pose_of(method: str, corners, camera: Camera):
+    if method == "visloc":
+        p = estimate_marker_pose(corners, MARKER_LENGTH, camera)
+        return p.R, p.t
+    L = MARKER_LENGTH
+    obj = np.array([[-L / 2, L / 2, 0], [L / 2, L / 2, 0], [L / 2, -L / 2, 0], [-L / 2, -L / 2, 0]])
+    ok, rvec, tvec = cv2.solvePnP(obj, corners.astype(np.float64), camera.K, None, flags=cv2.SOLVEPNP_IPPE_SQUARE)
+    if not ok:
+        return None
+    return cv2.Rodrigues(rvec)[0], tvec.ravel()
+
+
+def run_rendered(size, methods, rounds, dict_name, sets, seed0):
+    scenes = []
+    for name, n in sets.items():
+        for i in range(n):
+            sc = random_scene(np.random.default_rng([seed0, size[0], list(SETS).index(name), i]), size=size,
+                              dictionary=dict_name, difficulty=name)
+            scenes.append((name, sc))
+    times = {m: [] for m in methods}
+    outputs = {m: [None] * len(scenes) for m in methods}
+    for r in range(rounds):
+        for k, (_, sc) in enumerate(scenes):
+            order = list(methods) if (r + k) % 2 == 0 else list(methods)[::-1]
+            for m in order:
+                t0 = time.perf_counter()
+                out = methods[m](sc.image)
+                times[m].append(time.perf_counter() - t0)
+                if r == 0:
+                    outputs[m][k] = out
+    stats = {}
+    for m in methods:
+        per_set = {}
+        for name in sets:
+            idx = [k for k, (s, _) in enumerate(scenes) if s == name]
+            n_truth = tp = fp = flips = 0
+            cerr, rot, trans = [], [], []
+            for k in idx:
+                sc = scenes[k][1]
+                truth = [t for t in sc.markers if t.visible]
+                n_truth += len(truth)
+                pairs, f = match(outputs[m][k], truth)
+                fp += f
+                tp += len(pairs)
+                camera = Camera(sc.K)
+                for c, gt in pairs:
+                    cerr.extend(corner_alignment(c, gt.corners))
+                    pose_corners = c
+                    meth = m
+                    if m == "opencv":  # IPPE_SQUARE on SUBPIX corners is scored under opencv_subpix
+                        continue
+                    pr = pose_of(meth, pose_corners, camera)
+                    if pr is None:
+                        continue
+                    e = np.degrees(rotation_angle(pr[0] @ gt.pose.R.T))
+                    rot.append(e)
+                    trans.append(np.linalg.norm(pr[1] - gt.pose.t) / np.linalg.norm(gt.pose.t))
+                    flips += e > FLIP_DEG
+            per_set[name] = {
+                "frames": len(idx),
+                "markers": n_truth,
+                "recall": tp / n_truth if n_truth else None,
+                "false_positives_per_frame": fp / len(idx),
+                "corner_rms_px": float(np.sqrt(np.mean(np.square(cerr)))) if cerr else None,
+                "corner_median_px": float(np.median(cerr)) if cerr else None,
+                "rot_err_median_deg": float(np.median(rot)) if rot else None,
+                "trans_err_median_pct": float(100 * np.median(trans)) if trans else None,
+                "flip_rate": flips / len(rot) if rot else None,
+            }
+        stats[m] = {"ms_median": 1e3 * float(np.median(times[m])), "ms_mean": 1e3 * float(np.mean(times[m])),
+                    "sets": per_set}
+    return stats
+
+
+def run_real(rounds):
+    manifest = json.loads((ROOT / "datasets/real/manifest.json").read_text())
+    rows = []
+    for im in manifest["images"]:
+        img = cv2.imread(str(ROOT / "datasets/real" / im["file"]), cv2.IMREAD_GRAYSCALE)
+        dn = im["dictionary"]
+        if dn.endswith(".yml"):
+            path = str(ROOT / "datasets/real" / dn)
+            fs = cv2.FileStorage(path, cv2.FILE_STORAGE_READ)
+            cvd = cv2.aruco.Dictionary()
+            cvd.readDictionary(fs.root())
+            fs.release()
+            vl = MarkerDetector(path)
+            cv_det = opencv_detector(None, False, cvd)
+        else:
+            vl = MarkerDetector(dn)
+            cv_det = opencv_detector(dn, False)
+        found = {"visloc": [(d.id, d.corners) for d in vl.detect(img)]}
+        c, ids, _ = cv_det.detectMarkers(img)
+        found["opencv"] = [] if ids is None else [(int(i), cc.reshape(4, 2)) for cc, i in zip(c, ids.ravel())]
+        if dn == "DICT_APRILTAG_36h11":
+            import pupil_apriltags
+
+            at = pupil_apriltags.Detector(families="tag36h11", nthreads=2)
+            found["apriltag3"] = [(int(d.tag_id), d.corners[[1, 0, 3, 2]] - 0.5) for d in at.detect(img)]
+        row = {"file": im["file"], "dictionary": dn}
+        for m, dets in found.items():
+            r = {"detections": len(dets)}
+            if im.get("expected_ids"):
+                got = {i for i, _ in dets}
+                r["expected_found"] = len(set(im["expected_ids"]) & got)
+                r["expected"] = len(im["expected_ids"])
+                r["unexpected_ids"] = sorted(got - set(im["expected_ids"]))
+            if im.get("reference_corners"):
+                diffs = [np.abs(cc - np.array(im["reference_corners"][str(i)])).max()
+                         for i, cc in dets if str(i) in im["reference_corners"]]
+                r["max_corner_diff_px"] = float(max(diffs)) if diffs else None
+                r["within_tolerance"] = bool(diffs) and max(diffs) <= im["tolerance_px"]
+            if im.get("reference_detections"):
+                refs = [np.array(x["corners"]) for x in im["reference_detections"]]
+                hits = [any(np.abs(cc.mean(axis=0) - ref.mean(axis=0)).max() < 4 for _, cc in dets) for ref in refs]
+                r["reference_found"] = int(sum(hits))
+                r["reference"] = len(refs)
+            row[m] = r
+        rows.append(row)
+    return rows
+
+
+def run_negatives():
+    """False positives on real photographs without markers (scikit-image data, public domain / CC0)."""
+    from skimage import data
+
+    names = ["astronaut", "camera", "coffee", "chelsea", "rocket", "brick", "grass", "gravel", "coins", "moon", "page", "text"]
+    dicts = ["DICT_4X4_50", "DICT_6X6_250", "DICT_APRILTAG_36h11"]
+    fp = {"visloc": 0, "opencv": 0}
+    for dn in dicts:
+        vl = MarkerDetector(dn)
+        cvd = opencv_detector(dn, False)
+        for n in names:
+            img = getattr(data, n)()
+            if img.ndim == 3:
+                img = cv2.cvtColor(img[..., :3], cv2.COLOR_RGB2GRAY)
+            fp["visloc"] += len(vl.detect(img))
+            ids = cvd.detectMarkers(img)[1]
+            fp["opencv"] += 0 if ids is None else len(ids)
+    return {"images": len(names), "dictionaries": dicts, "false_positives": fp}
+
+
+def _plain(o):
+    """JSON fallback for numpy scalars."""
+    return o.item() if hasattr(o, "item") else str(o)
+
+
+def fmt(v, digits=3):
+    if v is None:
+        return "–"
+    if isinstance(v, float):
+        return f"{v:.{digits}f}"
+    return str(v)
+
+
+def markdown(result) -> str:
+    lines = []
+    for key, res in result["rendered"].items():
+        lines.append(f"\n**{key}** (median ms per frame over all sets; ratio to OpenCV default)\n")
+        base = res["opencv"]["ms_median"]
+        lines.append("| method | ms/frame | ratio | set | recall | FP/frame | corner RMS px | corner median px | rot err median ° | trans err median % | flips |")
+        lines.append("|---|---|---|---|---|---|---|---|---|---|---|")
+        for m, st in res.items():
+            for k, (name, s) in enumerate(st["sets"].items()):
+                head = (m, fmt(st["ms_median"], 2), fmt(st["ms_median"] / base, 2)) if k == 0 else ("", "", "")
+                lines.append("| " + " | ".join([*head, name, fmt(s["recall"]), fmt(s["false_positives_per_frame"], 2),
+                                                 fmt(s["corner_rms_px"]), fmt(s["corner_median_px"]), fmt(s["rot_err_median_deg"], 2),
+                                                 fmt(s["trans_err_median_pct"], 2), fmt(s["flip_rate"], 3)]) + " |")
+    lines.append("\n**Real photographs** (`datasets/real`)\n")
+    lines.append("| file | method | detections | expected found | reference tags found | max corner diff px |")
+    lines.append("|---|---|---|---|---|---|")
+    for row in result["real"]:
+        for m in ("visloc", "opencv", "apriltag3"):
+            if m not in row:
+                continue
+            r = row[m]
+            exp = f"{r['expected_found']}/{r['expected']}" if "expected" in r else "–"
+            ref = f"{r['reference_found']}/{r['reference']}" if "reference" in r else "–"
+            lines.append(f"| {row['file']} | {m} | {r['detections']} | {exp} | {ref} | {fmt(r.get('max_corner_diff_px'), 2)} |")
+    neg = result["negatives"]
+    lines.append(f"\nMarker-free real photos ({neg['images']} scikit-image images x {len(neg['dictionaries'])} dictionaries): "
+                 f"false positives visloc {neg['false_positives']['visloc']}, OpenCV {neg['false_positives']['opencv']}.")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="fewer frames (a smoke run)")
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--sizes", default=",".join(f"{w}x{h}" for w, h in SIZES))
+    ap.add_argument("--out", default=str(ROOT / "bench/results"))
+    args = ap.parse_args(argv)
+    sets = {k: max(3, v // 5) for k, v in SETS.items()} if args.quick else SETS
+    sizes = [tuple(int(v) for v in s.split("x")) for s in args.sizes.split(",")]
+    result = {"machine": {"python": sys.version.split()[0], "opencv": cv2.__version__, "numpy": np.__version__,
+                          "platform": platform.platform(), "cv_threads": cv2.getNumThreads()},
+              "rounds": args.rounds, "sets": sets, "rendered": {}}
+    for size in sizes:
+        key = f"{size[0]}x{size[1]} DICT_4X4_50"
+        print(f"rendered {key} ...", file=sys.stderr, flush=True)
+        result["rendered"][key] = run_rendered(size, make_methods("DICT_4X4_50", False), args.rounds, "DICT_4X4_50", sets, 1)
+    key = "640x480 DICT_APRILTAG_36h11"
+    print(f"rendered {key} ...", file=sys.stderr, flush=True)
+    at_sets = {k: v for k, v in sets.items() if k in ("easy", "hard")}
+    result["rendered"][key] = run_rendered((640, 480), make_methods("DICT_APRILTAG_36h11", True), args.rounds,
+                                           "DICT_APRILTAG_36h11", at_sets, 2)
+    print("real photographs ...", file=sys.stderr, flush=True)
+    result["real"] = run_real(args.rounds)
+    result["negatives"] = run_negatives()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "markers.json").write_text(json.dumps(result, indent=1, default=_plain))
+    md = markdown(result)
+    (out / "markers.md").write_text(md)
+    print(md)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

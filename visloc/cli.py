@@ -1,0 +1,122 @@
+"""``visloc`` command line: argparse sub-commands, one-line errors, exit codes.
+
+Exit codes: 0 success; 1 some frames failed (unreadable images, ...); 2 usage or
+configuration errors (missing path, unknown dictionary, malformed camera file, ...);
+130 interrupted (everything already computed is kept).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+from visloc import __version__
+
+__all__ = ["main", "build_parser", "UsageError"]
+
+
+class UsageError(ValueError):
+    """A problem with the command's arguments or configuration (exit status 2)."""
+
+
+def _positive(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not v > 0 or v != v or v == float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a positive finite number, got {text!r}")
+    return v
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 640x480, got {text!r}") from None
+    if w < 16 or h < 16:
+        raise argparse.ArgumentTypeError(f"image size must be at least 16x16, got {text!r}")
+    return w, h
+
+
+def _count(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {text!r}")
+    return v
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``visloc`` argument parser with its sub-commands."""
+    parser = argparse.ArgumentParser(
+        prog="visloc",
+        description="Visual localisation for small drones and robots: square fiducial markers "
+        "(the report's staged detector), Gauss-Newton marker poses, synthetic renders.",
+    )
+    parser.add_argument("--version", action="version", version=f"visloc {__version__}")
+    parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    d = sub.add_parser("detect", help="detect markers (and poses) in images, folders, videos or a camera")
+    d.add_argument("source", help="image, folder, glob pattern, video file or camera index")
+    d.add_argument("--dict", default="DICT_4X4_50", metavar="NAME|FILE",
+                   help="OpenCV dictionary name or dictionary YAML file (default: DICT_4X4_50)")
+    d.add_argument("--camera", metavar="FILE", help="camera file (OpenCV YAML) for poses")
+    d.add_argument("--marker-length", type=_positive, metavar="M",
+                   help="marker side in metres (black border included) for poses")
+    d.add_argument("--out", metavar="FILE.jsonl", help="write one JSON object per frame")
+    d.add_argument("--annotate", metavar="DIR|FILE.mp4", help="write annotated frames")
+    d.add_argument("--rerun", metavar="FILE.rrd", help="write a rerun recording")
+    d.add_argument("--explain", metavar="DIR", help="write every detector stage's picture per frame")
+    d.add_argument("--fps", type=_positive, help="frame rate for image lists (frame times)")
+    d.add_argument("--max-frames", type=_count, metavar="N", help="stop after N frames")
+    d.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+
+    r = sub.add_parser("render", help="render synthetic data with exact ground truth")
+    rs = r.add_subparsers(dest="what", metavar="WHAT")
+    rm = rs.add_parser("markers", help="random marker scenes (images or a video) + ground_truth.json")
+    rm.add_argument("outdir", help="output folder")
+    rm.add_argument("--n", type=_count, default=100, help="number of frames (default 100)")
+    rm.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
+    rm.add_argument("--size", type=_size, default=(640, 480), help="WIDTHxHEIGHT (default 640x480)")
+    rm.add_argument("--dict", default="DICT_4X4_50", metavar="NAME|FILE", help="dictionary")
+    rm.add_argument("--difficulty", default="easy", choices=["easy", "hard", "small", "empty"])
+    rm.add_argument("--video", action="store_true", help="write markers.mp4 of a moving camera instead")
+
+    m = sub.add_parser("demo", help="render a few frames, detect markers and poses, print a table")
+    m.add_argument("--out", default="visloc-demo", metavar="DIR", help="output folder (default ./visloc-demo)")
+    m.add_argument("--frames", type=_count, default=6, help="number of frames (default 6)")
+    m.add_argument("--seed", type=int, default=7, help="random seed (default 7)")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the ``visloc`` command line; returns the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help(sys.stderr)
+        return 2
+    if args.command == "render" and args.what is None:
+        parser.parse_args(["render", "--help"])
+    from visloc import commands  # imported late: `visloc --help` stays fast
+
+    run = {"detect": commands.detect, "render": commands.render, "demo": commands.demo}[args.command]
+    try:
+        return run(args)
+    except KeyboardInterrupt:
+        print("visloc: interrupted; results written so far are kept", file=sys.stderr)
+        return 130
+    except (UsageError, ValueError, TypeError, OSError) as exc:
+        if args.debug:
+            raise
+        print(f"visloc {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,363 @@
+"""Pinhole camera with OpenCV's lens-distortion model.
+
+:class:`Camera` holds the intrinsic matrix ``K``, OpenCV distortion coefficients and,
+optionally, the image size the calibration belongs to. It reads and writes OpenCV
+FileStorage YAML (the format of ``calib/*.yml`` and of OpenCV's calibration tools) and maps
+points between pixels, undistorted pixels and normalized image coordinates.
+
+Coordinates follow :mod:`visloc.types`: pixel centres at integer ``(x, y)``; the camera frame
+is OpenCV's (x right, y down, z forward).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import cv2
+import numpy as np
+from numpy.typing import ArrayLike
+
+from visloc.types import FloatArray
+
+if TYPE_CHECKING:
+    from visloc.types import Pose
+
+#: Numbers of distortion coefficients OpenCV accepts.
+DIST_SIZES = (4, 5, 8, 12, 14)
+
+# Undistortion is iterative; OpenCV's default (5 iterations) leaves ~0.01 px of error at the
+# border of a strongly distorted 640x480 image (k1 = -0.3). This converges to ~1e-12 px.
+_UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-12)
+
+
+def _cv_message(exc: BaseException) -> str:
+    """The useful part of an OpenCV error message (its text after the source location)."""
+    text = " ".join(str(exc).split())
+    m = re.search(r"error: \([-\d]+:[^)]*\) (.*)$", text)
+    return m.group(1) if m else (text or "parse error")
+
+
+def _readonly(a: np.ndarray) -> np.ndarray:
+    a.setflags(write=False)
+    return a
+
+
+def _as_points(points: ArrayLike, dim: int, name: str) -> FloatArray:
+    p = np.asarray(points, dtype=np.float64)
+    if p.ndim == 1 and p.shape[0] == dim:
+        p = p[None, :]
+    if p.ndim != 2 or p.shape[1] != dim:
+        raise ValueError(f"{name} must have shape (N, {dim}), got {np.shape(points)}")
+    return p
+
+
+@dataclass(frozen=True, eq=False)
+class Camera:
+    """Intrinsics of a pinhole camera with OpenCV lens distortion.
+
+    Parameters
+    ----------
+    K : array_like (3, 3)
+        Camera matrix ``[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]`` in pixels; ``fx, fy > 0``.
+        Skew must be zero (OpenCV's distortion model ignores it).
+    dist : array_like (4,), (5,), (8,), (12,) or (14,), optional
+        OpenCV distortion coefficients ``(k1, k2, p1, p2[, k3[, k4, k5, k6[, s1..s4[, tx, ty]]]])``;
+        ``None`` means no distortion (stored as ``zeros(5)``).
+    size : (int, int), optional
+        ``(width, height)`` in pixels of the images the calibration belongs to.
+
+    Attributes
+    ----------
+    K : ndarray (3, 3) float64, read-only
+    dist : ndarray (n,) float64, read-only
+    size : tuple (width, height) or None
+    """
+
+    K: FloatArray
+    dist: FloatArray | None = None
+    size: tuple[int, int] | None = None
+    _distorted: bool = field(init=False, default=False, repr=False)
+
+    def __post_init__(self) -> None:
+        K = np.array(self.K, dtype=np.float64)
+        if K.shape != (3, 3):
+            raise ValueError(f"K must have shape (3, 3), got {np.shape(self.K)}")
+        if not np.all(np.isfinite(K)):
+            raise ValueError(f"K must be finite, got {K.tolist()}")
+        if not (K[0, 0] > 0 and K[1, 1] > 0):
+            raise ValueError(f"K must have positive focal lengths, got fx={K[0, 0]}, fy={K[1, 1]}")
+        if not np.array_equal(K[2], [0.0, 0.0, 1.0]):
+            raise ValueError(f"K's last row must be [0, 0, 1], got {K[2].tolist()}")
+        if K[0, 1] != 0.0 or K[1, 0] != 0.0:
+            raise ValueError(
+                f"K must have zero skew (K[0, 1] = K[1, 0] = 0), got {K[0, 1]}, {K[1, 0]}"
+            )
+        if self.dist is None:
+            dist = np.zeros(5)
+        else:
+            dist = np.array(self.dist, dtype=np.float64).reshape(-1)
+            if dist.size not in DIST_SIZES:
+                raise ValueError(
+                    f"dist must have 4, 5, 8, 12 or 14 coefficients, got {dist.size} "
+                    f"(shape {np.shape(self.dist)})"
+                )
+            if not np.all(np.isfinite(dist)):
+                raise ValueError(f"dist must be finite, got {dist.tolist()}")
+        size = self.size
+        if size is not None:
+            try:
+                w, h = size
+            except (TypeError, ValueError):
+                raise ValueError(f"size must be (width, height), got {size!r}") from None
+            if int(w) != w or int(h) != h or w <= 0 or h <= 0:
+                raise ValueError(f"size must be two positive integers, got {size!r}")
+            size = (int(w), int(h))
+        object.__setattr__(self, "K", _readonly(K))
+        object.__setattr__(self, "dist", _readonly(dist))
+        object.__setattr__(self, "size", size)
+        object.__setattr__(self, "_distorted", bool(np.any(dist != 0.0)))
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def fx(self) -> float:
+        """Focal length along x, pixels."""
+        return float(self.K[0, 0])
+
+    @property
+    def fy(self) -> float:
+        """Focal length along y, pixels."""
+        return float(self.K[1, 1])
+
+    @property
+    def cx(self) -> float:
+        """Principal point x, pixels."""
+        return float(self.K[0, 2])
+
+    @property
+    def cy(self) -> float:
+        """Principal point y, pixels."""
+        return float(self.K[1, 2])
+
+    @property
+    def has_distortion(self) -> bool:
+        """Whether any distortion coefficient is non-zero."""
+        return self._distorted
+
+    def __repr__(self) -> str:
+        size = "None" if self.size is None else f"({self.size[0]}, {self.size[1]})"
+        dist = ", ".join(f"{d:.6g}" for d in self.dist) if self.has_distortion else "none"
+        return (
+            f"Camera(fx={self.fx:.6g}, fy={self.fy:.6g}, cx={self.cx:.6g}, cy={self.cy:.6g}, "
+            f"dist=[{dist}], size={size})"
+        )
+
+    # ------------------------------------------------------------------ constructors
+    @classmethod
+    def from_fov(
+        cls,
+        width: int,
+        height: int,
+        hfov_deg: float | None = None,
+        *,
+        dfov_deg: float | None = None,
+        dist: ArrayLike | None = None,
+    ) -> Camera:
+        """An ideal camera (square pixels, centred principal point) from a field of view.
+
+        Parameters
+        ----------
+        width, height : int
+            Image size, pixels.
+        hfov_deg : float, optional
+            Horizontal field of view, degrees, in (0, 180).
+        dfov_deg : float, optional, keyword-only
+            Diagonal field of view instead (as camera data sheets often give it).
+        dist : array_like, optional
+            Distortion coefficients to attach.
+
+        Notes
+        -----
+        ``f = (extent / 2) / tan(fov / 2)`` with ``extent`` the image width or diagonal in
+        pixels; the principal point is the image centre ``((width - 1) / 2, (height - 1) / 2)``
+        under the pixel-centre convention.
+        """
+        if (hfov_deg is None) == (dfov_deg is None):
+            raise ValueError("give exactly one of hfov_deg and dfov_deg")
+        fov = hfov_deg if hfov_deg is not None else dfov_deg
+        name = "hfov_deg" if hfov_deg is not None else "dfov_deg"
+        if not (math.isfinite(fov) and 0.0 < fov < 180.0):
+            raise ValueError(f"{name} must be in (0, 180) degrees, got {fov}")
+        if int(width) != width or int(height) != height or width <= 0 or height <= 0:
+            raise ValueError(f"width and height must be positive integers, got {width}, {height}")
+        extent = width if hfov_deg is not None else math.hypot(width, height)
+        f = 0.5 * extent / math.tan(math.radians(fov) / 2.0)
+        K = np.array([[f, 0.0, (width - 1) / 2.0], [0.0, f, (height - 1) / 2.0], [0, 0, 1.0]])
+        return cls(K, dist, (int(width), int(height)))
+
+    @classmethod
+    def from_file(cls, path: str | Path) -> Camera:
+        """Read an OpenCV FileStorage file (YAML/XML/JSON).
+
+        Reads ``camera_matrix`` (required), ``distortion_coefficients`` (optional, zeros when
+        absent) and ``image_width`` / ``image_height`` (optional, ``size=None`` when absent).
+
+        Raises
+        ------
+        ValueError
+            When the file is missing, unreadable or its contents are malformed; the message
+            names the path and the problem.
+        """
+        path = Path(path)
+        if not path.is_file():
+            raise ValueError(f"camera file {str(path)!r} does not exist")
+        if path.stat().st_size == 0:
+            raise ValueError(f"camera file {str(path)!r} is empty")
+        try:
+            fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+        except (cv2.error, SystemError) as exc:
+            cause = exc.__cause__ if isinstance(exc, SystemError) and exc.__cause__ else exc
+            msg = _cv_message(cause)
+            raise ValueError(
+                f"camera file {str(path)!r} is not OpenCV FileStorage: {msg}"
+            ) from None
+        try:
+            if not fs.isOpened():
+                raise ValueError(
+                    f"camera file {str(path)!r} could not be opened by cv2.FileStorage"
+                )
+            K = cls._read_matrix(fs, "camera_matrix", path, required=True)
+            dist = cls._read_matrix(fs, "distortion_coefficients", path, required=False)
+            w = cls._read_int(fs, "image_width", path)
+            h = cls._read_int(fs, "image_height", path)
+        finally:
+            fs.release()
+        if (w is None) != (h is None):
+            raise ValueError(
+                f"camera file {str(path)!r} has only one of image_width and image_height"
+            )
+        try:
+            return cls(
+                K, None if dist is None or dist.size == 0 else dist, None if w is None else (w, h)
+            )
+        except ValueError as exc:
+            raise ValueError(f"camera file {str(path)!r}: {exc}") from None
+
+    @staticmethod
+    def _read_matrix(
+        fs: cv2.FileStorage, key: str, path: Path, *, required: bool
+    ) -> FloatArray | None:
+        node = fs.getNode(key)
+        if node.empty() or node.isNone():
+            if required:
+                raise ValueError(f"camera file {str(path)!r} has no {key!r}")
+            return None
+        m = None
+        if node.isMap():
+            try:
+                m = node.mat()
+            except cv2.error:
+                m = None
+        if m is None:
+            raise ValueError(f"camera file {str(path)!r}: {key!r} is not an opencv-matrix")
+        return np.asarray(m, dtype=np.float64)
+
+    @staticmethod
+    def _read_int(fs: cv2.FileStorage, key: str, path: Path) -> int | None:
+        node = fs.getNode(key)
+        if node.empty() or node.isNone():
+            return None
+        if not node.isInt():
+            raise ValueError(f"camera file {str(path)!r}: {key!r} is not an integer")
+        return int(node.real())
+
+    def to_file(self, path: str | Path) -> None:
+        """Write OpenCV FileStorage YAML (``camera_matrix``, ``distortion_coefficients`` and,
+        when ``size`` is known, ``image_width`` / ``image_height``)."""
+        path = Path(path)
+        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_FORMAT_YAML)
+        if not fs.isOpened():
+            raise ValueError(f"camera file {str(path)!r} could not be opened for writing")
+        try:
+            if self.size is not None:
+                fs.write("image_width", int(self.size[0]))
+                fs.write("image_height", int(self.size[1]))
+            fs.write("camera_matrix", np.ascontiguousarray(self.K))
+            fs.write("distortion_coefficients", np.ascontiguousarray(self.dist.reshape(-1, 1)))
+        finally:
+            fs.release()
+
+    def scaled(self, width: int, height: int) -> Camera:
+        """The same camera for images resized to ``(width, height)``.
+
+        Pixel centres sit at integer coordinates, so a resize by ``s`` maps ``x`` to
+        ``(x + 0.5) * s - 0.5`` (as ``cv2.resize`` does); focal lengths scale by ``s``.
+        Distortion coefficients act on normalized coordinates and are unchanged.
+        """
+        if self.size is None:
+            raise ValueError("scaled() needs the calibration's size; this camera has size=None")
+        if int(width) != width or int(height) != height or width <= 0 or height <= 0:
+            raise ValueError(f"width and height must be positive integers, got {width}, {height}")
+        sx = width / self.size[0]
+        sy = height / self.size[1]
+        K = self.K.copy()
+        K[0, 0] *= sx
+        K[1, 1] *= sy
+        K[0, 2] = (K[0, 2] + 0.5) * sx - 0.5
+        K[1, 2] = (K[1, 2] + 0.5) * sy - 0.5
+        return Camera(K, self.dist.copy(), (int(width), int(height)))
+
+    # ------------------------------------------------------------------ point mappings
+    def normalize(self, points: ArrayLike) -> FloatArray:
+        """Normalized image coordinates ``(x/z, y/z)`` of (N, 2) pixel points (distortion removed).
+
+        Returns
+        -------
+        ndarray (N, 2) float64
+        """
+        p = _as_points(points, 2, "points")
+        if not self.has_distortion:
+            return (p - self.K[:2, 2]) / self.K[[0, 1], [0, 1]]
+        out = cv2.undistortPoints(
+            p.reshape(-1, 1, 2), self.K, self.dist, criteria=_UNDISTORT_CRITERIA
+        )
+        return out.reshape(-1, 2).astype(np.float64, copy=False)
+
+    def undistort_points(self, points: ArrayLike) -> FloatArray:
+        """Pixel coordinates, in the ideal pinhole camera with the same ``K``, of (N, 2) points.
+
+        The identity when there is no distortion.
+
+        Returns
+        -------
+        ndarray (N, 2) float64
+        """
+        p = _as_points(points, 2, "points")
+        if not self.has_distortion:
+            return p.copy()
+        return self.normalize(p) * self.K[[0, 1], [0, 1]] + self.K[:2, 2]
+
+    def project(self, points_cam: ArrayLike) -> FloatArray:
+        """Pixels (with distortion) of (N, 3) points given in the camera frame.
+
+        Points must lie in front of the camera (``z > 0``); others give meaningless pixels.
+
+        Returns
+        -------
+        ndarray (N, 2) float64
+        """
+        p = _as_points(points_cam, 3, "points_cam")
+        if not self.has_distortion:
+            xy = p[:, :2] / p[:, 2:3]
+            return xy * self.K[[0, 1], [0, 1]] + self.K[:2, 2]
+        zero = np.zeros(3)
+        out, _ = cv2.projectPoints(p.reshape(-1, 1, 3), zero, zero, self.K, self.dist)
+        return out.reshape(-1, 2).astype(np.float64, copy=False)
+
+    def project_object(self, points_obj: ArrayLike, pose: Pose) -> FloatArray:
+        """Pixels of (N, 3) object points seen with ``pose`` (object frame into camera frame)."""
+        p = _as_points(points_obj, 3, "points_obj")
+        return self.project(pose.apply(p))

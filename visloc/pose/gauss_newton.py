@@ -1,0 +1,273 @@
+"""Gauss-Newton refinement of a camera pose on the reprojection error.
+
+The report (§3.2.2, Appendix G) searches the rotation and translation with a Gauss-Newton
+iteration whose parameters are the states ``[x y z phi theta psi]``. Here: the same
+parameters, an analytic Jacobian, Marquardt's damping for starts far from the minimum, and
+several starts refined at once (vectorised over the starts).
+
+Residuals are in pixels of the undistorted image: ``f * (projected - observed)`` with the
+observed points in normalized image coordinates and ``f = (fx, fy)``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from visloc.types import FloatArray
+
+#: LM stops a start when a step lowers its squared error by less than this fraction (at a
+#: noisy minimum the parameters are then within ~1e-3 standard deviations) ...
+RTOL = 1e-6
+#: ... or by less than this one when its error is over 1.5 times the lowest start's. Any
+#: start but the lowest stops after :data:`MAX_ITER_OTHER` iterations (a flip's error is
+#: wanted to a few digits; a start that has found no minimum nearby is wanted not at all).
+RTOL_OTHER = 1e-4
+MAX_ITER_OTHER = 6
+#: ... and any start stops when the predicted decrease is below RTOL of its error plus this
+#: (squared residual units): the floating-point floor of exact data.
+ATOL = 1e-20
+
+_EYE6 = np.eye(6)
+
+# Rows of q x a and q x b (a = (1, 0, -u), b = (0, 1, -v)) as q @ _CROSS, q = R X a row:
+# (-qy, qx, 0) multiplies u (and v); (0, qz, -qy) and (-qz, 0, qx) are the constant parts.
+_CROSS = np.array(
+    [
+        [0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0],
+        [-1.0, 0.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0],
+        [0.0, 0.0, 0.0, 0.0, 1.0, 0.0, -1.0, 0.0, 0.0],
+    ]
+)
+
+
+def rotations_and_rates(params: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """``R = Rz(psi) Ry(theta) Rx(phi)`` (S, 3, 3) and ``W`` (S, 3, 3), whose columns turn
+    Euler rates into a rotation vector: ``w = R e_x dphi + Rz(psi) e_y dtheta + e_z dpsi``.
+
+    Scalar code: S is a handful and numpy's per-call cost would dominate.
+    """
+    R = []
+    W = []
+    for phi, theta, psi in params[:, 3:].tolist():
+        cph, sph = math.cos(phi), math.sin(phi)
+        cth, sth = math.cos(theta), math.sin(theta)
+        cps, sps = math.cos(psi), math.sin(psi)
+        r00, r10 = cps * cth, sps * cth
+        R.append(
+            (
+                (r00, cps * sth * sph - sps * cph, cps * sth * cph + sps * sph),
+                (r10, sps * sth * sph + cps * cph, sps * sth * cph - cps * sph),
+                (-sth, cth * sph, cth * cph),
+            )
+        )
+        W.append(((r00, -sps, 0.0), (r10, cps, 0.0), (-sth, 0.0, 1.0)))
+    return np.array(R), np.array(W)
+
+
+def _project(params: FloatArray, X: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, bool]:
+    """``q = R X`` (S, 3, N), normalized projections ``uv`` (S, 2, N), ``1/z`` (S, N) (``0``
+    for points not in front of the camera) and whether there are any such points."""
+    q = rotations_and_rates(params)[0] @ X
+    z = q[:, 2] + params[:, 2:3]
+    behind = bool((z <= 0.0).any())
+    if behind:
+        z = np.where(z > 0.0, z, np.inf)
+    iz = 1.0 / z
+    uv = (q[:, :2] + params[:, :2, None]) * iz[:, None]
+    return q, uv, iz, behind
+
+
+def reprojection_residuals(
+    params: FloatArray, X: FloatArray, xy: FloatArray, f: FloatArray
+) -> FloatArray:
+    """Residuals (S, 2N) ``[du_0..du_N-1, dv_0..dv_N-1]`` in pixels; ``inf`` for a start
+    that puts any point behind the camera.
+
+    Parameters
+    ----------
+    params : (S, 6)
+        ``[tx, ty, tz, phi, theta, psi]``.
+    X : (3, N)
+        Object points, columns.
+    xy : (2, N)
+        Observed normalized image coordinates, columns.
+    f : (2, 1)
+        ``[[fx], [fy]]``.
+    """
+    _, uv, iz, behind = _project(params, X)
+    r = ((uv - xy) * f).reshape(len(params), -1)
+    if behind:
+        r[(iz == 0.0).any(axis=1)] = np.inf
+    return r
+
+
+def residuals_and_jacobian(
+    params: FloatArray, X: FloatArray, xy: FloatArray, f: FloatArray
+) -> FloatArray:
+    """``E = [J | r]`` (S, 2N, 7): the analytic Jacobian d r / d params in its first six
+    columns and the residuals of :func:`reprojection_residuals` in the last, so that
+    ``E^T E`` holds ``J^T J``, ``J^T r`` and ``r^T r`` at once."""
+    S = params.shape[0]
+    N = X.shape[1]
+    R, W = rotations_and_rates(params)
+    q = R @ X
+    z = q[:, 2] + params[:, 2:3]
+    behind = bool((z <= 0.0).any())
+    if behind:
+        z = np.where(z > 0.0, z, np.inf)
+    iz = 1.0 / z
+    uv = (q[:, :2] + params[:, :2, None]) * iz[:, None]
+    fiz = f * iz[:, None]  # (S, 2, N): f / z
+    E = np.empty((S, 2, N, 7))
+    # translation: d(x/z) = (dx - u dz) / z
+    E[:, 0, :, 0] = fiz[:, 0]
+    E[:, 0, :, 1] = 0.0
+    E[:, 1, :, 0] = 0.0
+    E[:, 1, :, 1] = fiz[:, 1]
+    E[..., 2] = -uv * fiz
+    # rotation: d(R X) = w x q for a small rotation w; with a = (1, 0, -u), b = (0, 1, -v)
+    # du = a . (w x q) / z = (q x a) . w / z, and dv = (q x b) . w / z; w = W d(angles)
+    Q = (q.mT @ _CROSS).reshape(S, 1, N, 3, 3)
+    G = uv[..., None] * Q[..., 0, :] + Q[:, 0, :, 1:].swapaxes(1, 2)  # (S, 2, N, 3)
+    E[..., 3:6] = (G.reshape(S, 2 * N, 3) @ W).reshape(S, 2, N, 3) * fiz[..., None]
+    E[..., 6] = (uv - xy) * f
+    E = E.reshape(S, 2 * N, 7)
+    if behind:
+        E[(iz == 0.0).any(axis=1), :, 6] = np.inf
+    return E
+
+
+def levenberg_marquardt(
+    params: FloatArray, X: FloatArray, xy: FloatArray, f: FloatArray, max_iter: int
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Refine S starts at once.
+
+    Gauss-Newton steps (report Appendix G) with Marquardt's damping:
+    ``(J^T J + lam diag(J^T J)) dx = -J^T r``; ``lam`` shrinks tenfold after a step that
+    lowers the error and grows tenfold after one that does not (the step is then undone).
+    A start stops when a step lowers its error, or the linear model predicts it would lower
+    it, by less than :data:`RTOL` of it (plus :data:`ATOL`), or when ``lam`` exceeds 1e6.
+    A start whose error is over 1.5 times the lowest one (a flip, or a start far from any
+    minimum) stops at :data:`RTOL_OTHER`, and only the lowest start goes on after
+    :data:`MAX_ITER_OTHER` iterations.
+
+    Parameters
+    ----------
+    params : (S, 6)
+    X, xy, f
+        As for :func:`reprojection_residuals`.
+    max_iter : int
+
+    Returns
+    -------
+    params : (S, 6)
+    sse : (S,)
+        Sum of squared residuals, px^2 (``inf`` for a start behind the camera).
+    M : (S, 7, 7)
+        ``E^T E`` at the result (see :func:`residuals_and_jacobian`): ``M[:, :6, :6]`` is
+        ``J^T J``.
+    """
+    x = np.array(params, dtype=np.float64)
+    E = residuals_and_jacobian(x, X, xy, f)
+    M = E.mT @ E
+    S = len(x)
+    # bookkeeping in Python scalars: S is a handful
+    cost = M[:, 6, 6].tolist()
+    lam = [1e-3] * S
+    active = [math.isfinite(c) for c in cost]
+    for it in range(max_iter):
+        A = M[:, :6, :6]
+        g = M[:, :6, 6:]  # J^T r
+        damped = A + (A * _EYE6) * np.array(lam)[:, None, None]
+        if not all(active):  # stopped starts (maybe behind the camera) take no step
+            g = np.where(np.array(active)[:, None, None], g, 0.0)
+            damped[[not a for a in active]] = _EYE6
+        try:
+            step = np.linalg.solve(damped, g)
+        except np.linalg.LinAlgError:
+            step = np.linalg.pinv(damped) @ g
+        # d.g: a lower bound of the decrease of the squared error that the linear model
+        # predicts for the step d (d.g + lam d.diag(A).d; exactly d.g when undamped)
+        pred = (step * g).sum(axis=(1, 2)).tolist()
+        xn = x - step[..., 0]
+        best = min(cost)
+        rtol = [RTOL if c <= 1.5 * best else RTOL_OTHER for c in cost]
+        for i in range(S):
+            if active[i] and (
+                pred[i] <= rtol[i] * cost[i] + ATOL or (it >= MAX_ITER_OTHER and cost[i] > best)
+            ):
+                active[i] = False  # another step would change (next to) nothing
+        if not any(active):
+            break
+        Mn = residuals_and_jacobian(xn, X, xy, f)
+        Mn = Mn.mT @ Mn
+        cn = Mn[:, 6, 6].tolist()
+        for i in range(S):
+            if not active[i]:
+                continue
+            if cn[i] < cost[i]:  # False for nan
+                if cost[i] - cn[i] <= rtol[i] * cost[i]:
+                    active[i] = False
+                x[i] = xn[i]
+                M[i] = Mn[i]
+                cost[i] = cn[i]
+                lam[i] = max(lam[i] * 0.1, 1e-9)
+            else:
+                lam[i] *= 10.0
+                if lam[i] > 1e6:
+                    active[i] = False
+    return x, np.array(cost), M
+
+
+def refine_params(
+    params: ArrayLike,
+    object_points: ArrayLike,
+    xy: ArrayLike,
+    *,
+    fx: float = 1.0,
+    fy: float = 1.0,
+    max_iter: int = 20,
+) -> tuple[FloatArray, FloatArray]:
+    """Minimise the reprojection error over ``[x y z phi theta psi]`` from one or more starts.
+
+    Parameters
+    ----------
+    params : array_like (6,) or (S, 6)
+        Starting parameter vectors ``[tx, ty, tz, phi, theta, psi]`` (object frame into
+        camera frame, ``R = Rz(psi) Ry(theta) Rx(phi)``).
+    object_points : array_like (N, 3)
+        Points in the object frame, N >= 3.
+    xy : array_like (N, 2)
+        Their observed normalized image coordinates (undistorted, ``K^-1``).
+    fx, fy : float
+        Focal lengths, px: residuals are weighted as pixels (1 = normalized units).
+    max_iter : int
+        Most iterations.
+
+    Returns
+    -------
+    params : ndarray, (6,) or (S, 6) as given
+        Refined parameter vectors.
+    sse : float or ndarray (S,)
+        Sum of squared residuals (px^2 with ``fx, fy``); ``inf`` where a point ended behind
+        the camera.
+    """
+    x = np.array(params, dtype=np.float64)
+    single = x.ndim == 1
+    x = np.atleast_2d(x)
+    if x.ndim != 2 or x.shape[1] != 6:
+        raise ValueError(f"params must have shape (6,) or (S, 6), got {np.shape(params)}")
+    X = np.asarray(object_points, dtype=np.float64)
+    uv = np.asarray(xy, dtype=np.float64)
+    if X.ndim != 2 or X.shape[1] != 3 or X.shape[0] < 3:
+        raise ValueError(f"object_points must have shape (N, 3), N >= 3, got {X.shape}")
+    if uv.shape != (X.shape[0], 2):
+        raise ValueError(f"xy must have shape ({X.shape[0]}, 2), got {uv.shape}")
+    f = np.array([[fx], [fy]], dtype=np.float64)
+    x, sse, _ = levenberg_marquardt(x, X.T.copy(), uv.T.copy(), f, int(max_iter))
+    if single:
+        return x[0], float(sse[0])
+    return x, sse

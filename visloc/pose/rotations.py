@@ -1,0 +1,81 @@
+"""Z-Y-X Euler angles (report §2) and rotation distances.
+
+``R = Rz(psi) @ Ry(theta) @ Rx(phi)``; angle triplets are ordered ``[phi, theta, psi]`` as in
+the report's parameter vector ``[x, y, z, phi, theta, psi]``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from visloc.types import FloatArray
+
+
+def euler_to_matrix(angles: ArrayLike) -> FloatArray:
+    """Rotation matrices of Z-Y-X Euler angles.
+
+    Parameters
+    ----------
+    angles : array_like (..., 3) or (..., 6)
+        ``[phi, theta, psi]``, or full parameter vectors ``[x, y, z, phi, theta, psi]``
+        (the last three entries are used).
+
+    Returns
+    -------
+    ndarray (..., 3, 3)
+        ``Rz(psi) @ Ry(theta) @ Rx(phi)``.
+    """
+    a = np.asarray(angles, dtype=np.float64)[..., -3:]
+    c = np.cos(a)
+    s = np.sin(a)
+    cph, cth, cps = c[..., 0], c[..., 1], c[..., 2]
+    sph, sth, sps = s[..., 0], s[..., 1], s[..., 2]
+    # report §2: R(lambda) = Rz(psi) Ry(theta) Rx(phi), multiplied out
+    # fmt: off
+    R = np.stack(
+        [
+            cps * cth, cps * sth * sph - sps * cph, cps * sth * cph + sps * sph,
+            sps * cth, sps * sth * sph + cps * cph, sps * sth * cph - cps * sph,
+            -sth, cth * sph, cth * cph,
+        ],
+        axis=-1,
+    )
+    # fmt: on
+    return R.reshape(a.shape[:-1] + (3, 3))
+
+
+def matrix_to_euler(R: ArrayLike) -> FloatArray:
+    """Z-Y-X Euler angles ``[phi, theta, psi]`` (..., 3) of rotation matrices (..., 3, 3).
+
+    ``theta`` is in [-pi/2, pi/2] and ``phi, psi`` in (-pi, pi]: the branch of
+    ``Pose.euler_zyx`` (scipy's ``as_euler("ZYX")``).
+    """
+    R = np.asarray(R, dtype=np.float64)
+    theta = np.arcsin(np.clip(-R[..., 2, 0], -1.0, 1.0))
+    phi = np.arctan2(R[..., 2, 1], R[..., 2, 2])
+    psi = np.arctan2(R[..., 1, 0], R[..., 0, 0])
+    return np.stack([phi, theta, psi], axis=-1)
+
+
+def matrix_to_euler_list(R: FloatArray) -> list[list[float]]:
+    """:func:`matrix_to_euler` of a few matrices (S, 3, 3) in scalar code, as lists."""
+    out = []
+    for (r00, _, _), (r10, _, _), (r20, r21, r22) in np.asarray(R, dtype=np.float64).tolist():
+        theta = math.asin(min(max(-r20, -1.0), 1.0))
+        out.append([math.atan2(r21, r22), theta, math.atan2(r10, r00)])
+    return out
+
+
+def rotation_angle(R: ArrayLike) -> float:
+    """Angle (rad, in [0, pi]) of the rotation matrix ``R``; accurate near 0 and pi
+    (``atan2`` of the skew and symmetric parts rather than ``arccos`` of the trace)."""
+    M = np.asarray(R, dtype=np.float64)
+    if M.shape != (3, 3):
+        raise ValueError(f"R must have shape (3, 3), got {M.shape}")
+    (m00, m01, m02), (m10, m11, m12), (m20, m21, m22) = M.tolist()
+    s = 0.5 * math.sqrt((m21 - m12) ** 2 + (m02 - m20) ** 2 + (m10 - m01) ** 2)
+    c = 0.5 * (m00 + m11 + m22 - 1.0)
+    return math.atan2(s, c)

@@ -89,7 +89,7 @@ class DetectorParams:
 
     passes: tuple[SearchPass, ...] = (SearchPass(1.0, 9), SearchPass(2.0, 9))
     base_height: int = 540
-    blur_sigma: float = 0.8
+    blur_sigma: float = 0.6
     offset: float = 7.0
     candidates: CandidateFilter = field(default_factory=CandidateFilter)
     corner_sigma: float | None = None
@@ -201,28 +201,44 @@ class MarkerDetector:
         dets = self._run(image, log)
         return DetectionTrace(log["gray"], log["passes"], log["candidates"], dets)
 
-    def _propose(self, gray: NDArray[np.uint8], sp: SearchPass, base: float, log: dict | None):
-        """Stages 2-5 of one pass: candidate contours, their scale to full resolution, and
-        their polygon corners (K, 4, 2) in full-resolution pixels."""
-        p = self.params
+    def _work_image(self, gray: NDArray[np.uint8], f: float) -> tuple[NDArray[np.uint8], NDArray]:
+        """The grey image shrunk by ``f`` and the (x, y) scale back to full resolution."""
         work = gray
-        f = sp.scale * base
         if f > 1:
             size = (max(2, round(gray.shape[1] / f)), max(2, round(gray.shape[0] / f)))
-            work = cv2.resize(gray, size, interpolation=cv2.INTER_AREA)
-        scale = np.array([gray.shape[1] / work.shape[1], gray.shape[0] / work.shape[0]])
+            # area averaging has a fast path for whole factors; otherwise bilinear (the blur
+            # of stage 2 follows) costs a fifth of it
+            whole = f == int(f) and gray.shape[1] % int(f) == 0 and gray.shape[0] % int(f) == 0
+            work = cv2.resize(gray, size, interpolation=cv2.INTER_AREA if whole else cv2.INTER_LINEAR)
+        return work, np.array([gray.shape[1] / work.shape[1], gray.shape[0] / work.shape[0]])
+
+    def _stages_2_to_5(self, work: NDArray[np.uint8], window: int, min_side: float, log: dict | None,
+                       scale: NDArray) -> list[tuple[NDArray, NDArray]]:
+        """Blur, threshold, contours and candidate filter on the pass image ``work``."""
+        p = self.params
         blurred = blur(work, p.blur_sigma)  # stage 2
-        window = sp.window if sp.window is not None else default_window(work.shape)
         binary = threshold(blurred, window=window, offset=p.offset)  # stage 3
         contours = find_contours(binary)  # stage 4
         if log is not None:
             log["passes"].append(PassTrace(float(scale[0]), window, blurred, binary, contours))
-        # a marker needs at least about 1 px per cell to be decoded: smaller ones are not looked at
+        return filter_candidates(contours, work.shape, replace(p.candidates, min_side=min_side))  # 5
+
+    def _propose(self, gray: NDArray[np.uint8], base: float, log: dict | None):
+        """Stages 2-5 of every pass. Returns per pass: candidate contours (in the pass's image),
+        the scale to full resolution, and their polygon corners (K, 4, 2) in full-resolution
+        pixels."""
+        p = self.params
         n_cells = self.dictionary.marker_size + 2
-        bounds = replace(p.candidates, min_side=max(p.candidates.min_side, n_cells / scale.max()))
-        found = filter_candidates(contours, work.shape, bounds)  # stage 5
-        approx = np.array([orient_clockwise(q.astype(np.float64)) for _, q in found]).reshape(-1, 4, 2)
-        return [c for c, _ in found], scale, (approx + 0.5) * scale - 0.5
+        out = []
+        for sp in p.passes:
+            work, scale = self._work_image(gray, sp.scale * base)
+            window = sp.window if sp.window is not None else default_window(work.shape)
+            # a marker needs at least about 1 px per cell to be decoded: smaller ones are not looked at
+            min_side = max(p.candidates.min_side, n_cells / scale.max())
+            found = self._stages_2_to_5(work, window, min_side, log, scale)
+            approx = np.array([orient_clockwise(q.astype(np.float64)) for _, q in found]).reshape(-1, 4, 2)
+            out.append(([c for c, _ in found], scale, (approx + 0.5) * scale - 0.5))
+        return out
 
     def _run(self, image: NDArray[np.uint8], log: dict | None) -> list[MarkerDetection]:
         p = self.params
@@ -231,10 +247,12 @@ class MarkerDetector:
             log["gray"] = gray
         base = max(1.0, min(gray.shape[:2]) / p.base_height)
         n_cells = self.dictionary.marker_size + 2
+        slack = int(self.dictionary.max_correction * p.error_correction_rate) + 1  # +1: lenient
+        lo_white, hi_white = self.dictionary.white_range
+        lo_white, hi_white = lo_white - slack, hi_white + slack
         cands = _Cands()
         seen = np.zeros((0, 4, 2))
-        for sp in p.passes:
-            contours, scale, approx = self._propose(gray, sp, base, log)
+        for contours, scale, approx in self._propose(gray, base, log):
             if not contours:
                 continue
             # a candidate an earlier pass already proposed costs nothing more
@@ -244,8 +262,12 @@ class MarkerDetector:
             if not len(fresh):
                 continue
             # a cheap, lenient look at the cells through the polygon corners: most texture
-            # candidates end here, before they cost a corner fit and an edge refinement
-            looks = read_bits(sample_cells(gray, approx[fresh], n_cells), 0.5)[0]
+            # candidates (and the black cells inside markers) end here, before they cost a
+            # corner fit and an edge refinement: no black border, no contrast, or too few or
+            # too many white bits for any marker of the dictionary
+            valid, bits = read_bits(sample_cells(gray, approx[fresh], n_cells), 0.5)[:2]
+            white = bits.reshape(len(bits), -1).sum(axis=1)
+            looks = valid & (white >= lo_white) & (white <= hi_white)
             for i, ok in zip(fresh, looks, strict=True):
                 contour = contours[i]
                 if not ok:
@@ -297,12 +319,12 @@ class MarkerDetector:
 
 
 def _as_pass(p: object) -> SearchPass:
-    if isinstance(p, SearchPass):
-        return p
-    scale, window = p  # type: ignore[misc]
-    if not scale >= 1:
-        raise ValueError(f"passes: scale must be >= 1, got {scale}")
-    return SearchPass(float(scale), None if window is None else int(window))
+    sp = p if isinstance(p, SearchPass) else SearchPass(*p)  # type: ignore[misc]
+    if not sp.scale >= 1:
+        raise ValueError(f"passes: scale must be >= 1, got {sp.scale}")
+    if sp.window is not None and (sp.window < 3 or sp.window % 2 == 0):
+        raise ValueError(f"passes: window must be an odd integer >= 3, got {sp.window}")
+    return SearchPass(float(sp.scale), None if sp.window is None else int(sp.window))
 
 
 def _note(log: dict | None, contour, scale, split, quad, cells, bits, det, stage: str) -> None:
@@ -318,19 +340,17 @@ def _areas(q: NDArray) -> NDArray:
 
 def _distinct(quads: NDArray) -> NDArray[np.intp]:
     """Indices of the quads (K, 4, 2) to keep when several passes found the same one: a quad
-    whose corners all lie within 15 % of its side of an earlier quad's is dropped."""
+    whose centre lies within 15 % of its side of an earlier quad's centre, with a side within
+    25 % of that quad's, is dropped."""
     k = len(quads)
     if k < 2:
         return np.arange(k)
     side = np.sqrt(np.abs(_areas(quads)))
-    # corner distance for the 4 cyclic alignments; quads are clockwise, starting anywhere
-    best = np.full((k, k), np.inf)
-    for s in range(4):
-        d = np.linalg.norm(quads[:, None, :, :] - np.roll(quads, s, axis=1)[None, :, :, :], axis=3).max(axis=2)
-        best = np.minimum(best, d)
-    same = best < 0.15 * np.minimum(side[:, None], side[None, :])
-    keep = [i for i in range(k) if not same[i, :i].any()]
-    return np.array(keep, np.intp)
+    c = quads.mean(axis=1)
+    d2 = ((c[:, None, :] - c[None, :, :]) ** 2).sum(axis=2)
+    ratio = side[:, None] / np.maximum(side[None, :], 1e-9)
+    same = (d2 < (0.15 * side[:, None]) ** 2) & (ratio > 0.8) & (ratio < 1.25)
+    return np.flatnonzero(~np.tril(same, -1).any(axis=1))
 
 
 def _merge_duplicates(found: list[tuple[MarkerDetection, float]]) -> list[MarkerDetection]:

@@ -51,6 +51,13 @@ class Dictionary:
         """Cells per side of the bit pattern, without the border."""
         return int(self.bits.shape[1])
 
+    @property
+    def white_range(self) -> tuple[int, int]:
+        """Fewest and most white bits of any marker: a bit grid outside this range, widened by
+        the bits the match may correct, cannot match."""
+        w = self.bits.reshape(len(self), -1).sum(axis=1)
+        return int(w.min()), int(w.max())
+
     def __len__(self) -> int:
         return int(self.bits.shape[0])
 

@@ -1,0 +1,164 @@
+"""MarkerDetector on renders with exact ground truth, and its error handling."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from visloc.markers import MarkerDetector
+from visloc.markers.explain import write_explain
+from visloc.synth import default_camera, random_scene, render_markers
+from visloc.types import Pose
+
+
+def _match(dets, scene):
+    truth = {m.id: m for m in scene.markers if m.visible}
+    pairs = [(d, truth[d.id]) for d in dets if d.id in truth]
+    false = [d for d in dets if d.id not in truth]
+    return pairs, false, truth
+
+
+@pytest.fixture(scope="module")
+def detector():
+    return MarkerDetector("DICT_4X4_50")
+
+
+def test_clean_renders_are_found_with_hundredth_pixel_corners(detector):
+    errs, n_truth, n_found = [], 0, 0
+    for seed in range(6):
+        scene = random_scene(seed, size=(640, 480), difficulty="easy")
+        dets = detector.detect(scene.image)
+        pairs, false, truth = _match(dets, scene)
+        assert not false
+        n_truth += len(truth)
+        n_found += len(pairs)
+        for d, t in pairs:
+            errs.append(np.linalg.norm(d.corners - t.corners, axis=1))
+            assert d.hamming == 0 and d.margin > 0.5 and d.refined
+    assert n_found == n_truth
+    rms = float(np.sqrt(np.mean(np.concatenate(errs) ** 2)))
+    assert rms < 0.05, rms
+
+
+def test_hard_renders_keep_recall_and_subpixel_corners(detector):
+    errs, n_truth, n_found = [], 0, 0
+    for seed in range(100, 112):
+        scene = random_scene(seed, size=(640, 480), difficulty="hard")
+        pairs, false, truth = _match(detector.detect(scene.image), scene)
+        assert not false
+        n_truth += len(truth)
+        n_found += len(pairs)
+        errs += [np.linalg.norm(d.corners - t.corners, axis=1) for d, t in pairs]
+    assert n_found >= 0.95 * n_truth
+    assert float(np.median(np.concatenate(errs))) < 0.3
+
+
+def test_small_markers_are_found(detector):
+    n_truth = n_found = 0
+    for seed in range(200, 208):
+        scene = random_scene(seed, size=(640, 480), difficulty="small")
+        pairs, false, truth = _match(detector.detect(scene.image), scene)
+        assert not false
+        n_truth += len(truth)
+        n_found += len(pairs)
+    assert n_found == n_truth
+
+
+def test_empty_textured_frames_give_no_detection(detector):
+    for seed in range(300, 306):
+        scene = random_scene(seed, size=(640, 480), difficulty="empty")
+        assert detector.detect(scene.image) == []
+
+
+@pytest.mark.parametrize("yaw_quarters", [0, 1, 2, 3])
+def test_marker_at_any_of_four_rotations_decodes_with_corners_rotated(detector, yaw_quarters):
+    K = default_camera((320, 240))
+    yaw = yaw_quarters * np.pi / 2 + 0.2
+    R = Rotation.from_euler("zx", [yaw, 0.3]).as_matrix() @ np.diag([1.0, -1.0, -1.0])
+    pose = Pose(R, np.array([0.02, -0.01, 0.6]))
+    scene = render_markers(K, (320, 240), [(11, pose, 0.15)], "DICT_4X4_50", background="flat")
+    (d,) = detector.detect(scene.image)
+    assert d.id == 11
+    assert np.abs(d.corners - scene.markers[0].corners).max() < 0.05
+
+
+def test_rotating_the_image_rotates_the_corners(detector):
+    scene = random_scene(3, size=(640, 480), difficulty="easy")
+    img = scene.image
+    base = {d.id: d.corners for d in detector.detect(img)}
+    h, w = img.shape
+    rotated = np.ascontiguousarray(np.rot90(img))  # counter-clockwise: (x, y) -> (y, w - 1 - x)
+    turned = {d.id: d.corners for d in detector.detect(rotated)}
+    assert set(turned) == set(base)
+    for i, c in base.items():
+        expected = np.stack([c[:, 1], w - 1 - c[:, 0]], axis=1)
+        assert np.abs(turned[i] - expected).max() < 0.05
+
+
+@pytest.mark.parametrize("name", ["DICT_6X6_250", "DICT_APRILTAG_36h11", "DICT_ARUCO_ORIGINAL", "DICT_5X5_100"])
+def test_other_dictionaries(name):
+    det = MarkerDetector(name)
+    for seed in range(2):
+        scene = random_scene(seed, size=(640, 480), dictionary=name, difficulty="easy")
+        pairs, false, truth = _match(det.detect(scene.image), scene)
+        assert not false and len(pairs) == len(truth)
+
+
+def test_marker_cut_by_the_image_border_is_not_reported(detector):
+    K = default_camera((320, 240))
+    R = np.diag([1.0, -1.0, -1.0])  # facing the camera, upright
+    pose = Pose(R, np.array([-0.33, 0.0, 0.6]))  # centre near the left border: partly outside
+    scene = render_markers(K, (320, 240), [(5, pose, 0.15)], "DICT_4X4_50", background="flat")
+    assert not scene.markers[0].visible
+    assert detector.detect(scene.image) == []
+
+
+def test_trace_and_explain_pictures(tmp_path, detector):
+    scene = random_scene(1, size=(320, 240), difficulty="easy")
+    trace = detector.trace(scene.image)
+    assert {d.id for d in trace.detections} == {d.id for d in detector.detect(scene.image)}
+    assert trace.binary.shape == (240, 320) and len(trace.passes) == len(detector.params.passes)
+    stages = {c.stage for c in trace.candidates}
+    assert "accepted" in stages
+    paths = write_explain(trace, tmp_path, stem="f0")
+    names = {p.name for p in paths}
+    assert {"f0_C_contours.png", "f0_D_radial.png", "f0_I_detections.png", "f0_candidates.json"} <= names
+    assert all(p.stat().st_size > 0 for p in paths)
+
+
+def test_bgr_input_gives_the_same_result(detector):
+    scene = random_scene(2, size=(320, 240), difficulty="easy")
+    bgr = np.repeat(scene.image[:, :, None], 3, axis=2)
+    a = detector.detect(scene.image)
+    b = detector.detect(bgr)
+    assert [d.id for d in a] == [d.id for d in b]
+    assert all(np.allclose(x.corners, y.corners) for x, y in zip(a, b, strict=True))
+
+
+@pytest.mark.parametrize(
+    "bad, exc",
+    [
+        (np.zeros((0, 0), np.uint8), ValueError),
+        (np.zeros((1, 1), np.uint8), ValueError),
+        (np.zeros((40, 40), np.float64), TypeError),
+        (np.full((40, 40), np.nan), TypeError),
+        (np.zeros((40, 40, 2), np.uint8), ValueError),
+        ("image.png", TypeError),
+    ],
+)
+def test_bad_images_raise_naming_the_argument(detector, bad, exc):
+    with pytest.raises(exc, match="image"):
+        detector.detect(bad)
+
+
+def test_tiny_and_flat_images_give_nothing(detector):
+    assert detector.detect(np.zeros((2, 2), np.uint8)) == []
+    assert detector.detect(np.full((480, 640), 128, np.uint8)) == []
+
+
+def test_constructor_errors():
+    with pytest.raises(TypeError, match="unknown detector parameter"):
+        MarkerDetector("DICT_4X4_50", windw=3)
+    with pytest.raises(ValueError, match="unknown dictionary"):
+        MarkerDetector("DICT_NOPE")
+    with pytest.raises(ValueError, match="scale"):
+        MarkerDetector("DICT_4X4_50", passes=[(0.5, 9)])

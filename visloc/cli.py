@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
+from typing import NoReturn
 
 from visloc import __version__
 
@@ -50,16 +51,23 @@ def _count(text: str) -> int:
     return v
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line on stderr (exit status 2)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``visloc`` argument parser with its sub-commands."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="visloc",
         description="Visual localisation for small drones and robots: square fiducial markers "
         "(the report's staged detector), Gauss-Newton marker poses, synthetic renders.",
     )
     parser.add_argument("--version", action="version", version=f"visloc {__version__}")
     parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
 
     d = sub.add_parser("detect", help="detect markers (and poses) in images, folders, videos or a camera")
     d.add_argument("source", help="image, folder, glob pattern, video file or camera index")
@@ -77,7 +85,7 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--quiet", action="store_true", help="no progress bar or summary")
 
     r = sub.add_parser("render", help="render synthetic data with exact ground truth")
-    rs = r.add_subparsers(dest="what", metavar="WHAT")
+    rs = r.add_subparsers(dest="what", metavar="WHAT", parser_class=_Parser)
     rm = rs.add_parser("markers", help="random marker scenes (images or a video) + ground_truth.json")
     rm.add_argument("outdir", help="output folder")
     rm.add_argument("--n", type=_count, default=100, help="number of frames (default 100)")

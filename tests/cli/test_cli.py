@@ -1,0 +1,122 @@
+"""The command line, run through ``main([...])`` on rendered folders and videos."""
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+from visloc.cli import main
+
+
+@pytest.fixture(scope="module")
+def rendered(tmp_path_factory):
+    out = tmp_path_factory.mktemp("render")
+    assert main(["render", "markers", str(out), "--n", "4", "--seed", "3", "--size", "320x240"]) == 0
+    return out
+
+
+def _lines(path):
+    return [json.loads(x) for x in path.read_text().splitlines()]
+
+
+def test_render_writes_frames_ground_truth_and_camera(rendered):
+    gt = json.loads((rendered / "ground_truth.json").read_text())
+    assert len(gt["frames"]) == 4
+    assert all((rendered / f["file"]).is_file() for f in gt["frames"])
+    assert (rendered / "camera.yml").is_file()
+
+
+def test_detect_folder_with_poses_annotations_and_rerun(rendered, tmp_path, capsys):
+    out = tmp_path / "det.jsonl"
+    code = main(["detect", str(rendered), "--camera", str(rendered / "camera.yml"), "--marker-length", "0.15",
+                 "--out", str(out), "--annotate", str(tmp_path / "ann"), "--rerun", str(tmp_path / "run.rrd")])
+    assert code == 0
+    records = _lines(out)
+    gt = json.loads((rendered / "ground_truth.json").read_text())
+    assert [r["frame"] for r in records] == [0, 1, 2, 3]
+    for rec, frame in zip(records, gt["frames"], strict=True):
+        want = sorted(m["id"] for m in frame["markers"] if m["visible"])
+        assert sorted(m["id"] for m in rec["markers"]) == want
+        for m in rec["markers"]:
+            truth = next(t for t in frame["markers"] if t["id"] == m["id"])
+            assert np.abs(np.array(m["corners"]) - np.array(truth["corners"])).max() < 0.5
+            assert np.linalg.norm(np.array(m["tvec"]) - np.array(truth["tvec"])) < 0.01
+            assert m["reprojection_rms_px"] < 0.5
+    assert len(list((tmp_path / "ann").glob("*.png"))) == 4
+    assert (tmp_path / "run.rrd").stat().st_size > 0
+    assert "4 frames" in capsys.readouterr().err
+
+
+def test_corrupt_image_is_reported_and_the_run_goes_on(rendered, tmp_path, capsys):
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    for p in sorted(rendered.glob("frame_*.png"))[:2]:
+        (folder / p.name).write_bytes(p.read_bytes())
+    (folder / "frame_0001b.png").write_bytes(b"not a png at all")
+    out = tmp_path / "det.jsonl"
+    assert main(["detect", str(folder), "--out", str(out), "--quiet"]) == 1
+    records = _lines(out)
+    assert len(records) == 3
+    assert [r["frame"] for r in records] == [0, 1, 2]  # sorted: frame_0000, frame_0001, frame_0001b
+    assert "error" in records[2] and "frame_0001b.png" in records[2]["source"]
+    assert all(r["markers"] for r in records[:2])
+    err = capsys.readouterr().err
+    assert err.count("warning") == 1 and "frame_0001b.png" in err
+
+
+def test_detect_video(tmp_path):
+    assert main(["render", "markers", str(tmp_path), "--video", "--n", "12", "--size", "320x240"]) == 0
+    video = tmp_path / "markers.mp4"
+    cap = cv2.VideoCapture(str(video))
+    assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 12
+    cap.release()
+    out = tmp_path / "v.jsonl"
+    assert main(["detect", str(video), "--out", str(out), "--quiet"]) == 0
+    records = _lines(out)
+    assert len(records) == 12
+    assert sum(len(r["markers"]) for r in records) > 0
+    assert records[1]["time"] > records[0]["time"]
+
+
+def test_explain_writes_stage_pictures(rendered, tmp_path):
+    img = sorted(rendered.glob("frame_*.png"))[0]
+    assert main(["detect", str(img), "--explain", str(tmp_path / "ex"), "--quiet"]) == 0
+    names = {p.name for p in (tmp_path / "ex").iterdir()}
+    assert "frame_000000_I_detections.png" in names and "frame_000000_candidates.json" in names
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["detect", "/no/such/path.png"], "does not exist"),
+        (["detect", "{rendered}", "--dict", "DICT_NOPE"], "unknown dictionary"),
+        (["detect", "{rendered}", "--camera", "{bad_camera}", "--marker-length", "0.1"], "camera"),
+        (["detect", "{rendered}", "--marker-length", "-1"], "marker-length"),
+        (["detect", "{rendered}", "--marker-length", "0.1"], "--camera"),
+    ],
+)
+def test_configuration_errors_are_one_line_and_exit_2(rendered, tmp_path, capsys, args, message):
+    bad = tmp_path / "bad.yml"
+    bad.write_text("%YAML:1.0\ncamera_matrix: 3\n")
+    argv = [a.format(rendered=rendered, bad_camera=bad) for a in args]
+    try:
+        code = main(argv)
+    except SystemExit as exc:  # argparse's own checks
+        code = exc.code
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert len(err.splitlines()) == 1 and message in err
+    assert "Traceback" not in err
+
+
+def test_demo_prints_a_table_and_writes_outputs(tmp_path, capsys):
+    assert main(["demo", "--out", str(tmp_path / "demo"), "--frames", "2"]) == 0
+    text = capsys.readouterr().out
+    assert "corner RMS px" in text and "markers found" in text
+    assert len(_lines(tmp_path / "demo" / "detections.jsonl")) == 2
+    assert len(list((tmp_path / "demo" / "annotated").glob("*.png"))) == 2
+
+
+def test_no_command_prints_help():
+    assert main([]) == 2

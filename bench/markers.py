@@ -25,7 +25,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from visloc.markers import MarkerDetector
+from visloc.markers import FAST_PASSES, MarkerDetector
 from visloc.pose import Camera, estimate_marker_pose, rotation_angle
 from visloc.synth import MARKER_LENGTH, random_scene
 
@@ -43,9 +43,23 @@ def opencv_detector(dict_name: str | None, subpix: bool, dictionary=None) -> cv2
     return cv2.aruco.ArucoDetector(d, p)
 
 
+_APRILTAG = []
+
+
+def apriltag_detector():
+    """One AprilTag 3 detector for the whole run (quad_decimate=2, one thread): creating and
+    dropping several in one process corrupted the heap here."""
+    if not _APRILTAG:
+        import pupil_apriltags
+
+        _APRILTAG.append(pupil_apriltags.Detector(families="tag36h11", nthreads=1, quad_decimate=2.0))
+    return _APRILTAG[0]
+
+
 def make_methods(dict_name: str, with_apriltag: bool) -> dict:
     """name -> function(gray image) -> list of (id, corners (4, 2) in OpenCV order and pixel convention)."""
     vl = MarkerDetector(dict_name)
+    vl_fast = MarkerDetector(dict_name, passes=FAST_PASSES)
     cv_default = opencv_detector(dict_name, False)
     cv_subpix = opencv_detector(dict_name, True)
 
@@ -57,13 +71,12 @@ def make_methods(dict_name: str, with_apriltag: bool) -> dict:
 
     methods = {
         "visloc": lambda img: [(d.id, d.corners) for d in vl.detect(img)],
+        "visloc_fast": lambda img: [(d.id, d.corners) for d in vl_fast.detect(img)],
         "opencv": run_cv(cv_default),
         "opencv_subpix": run_cv(cv_subpix),
     }
     if with_apriltag:
-        import pupil_apriltags
-
-        at = pupil_apriltags.Detector(families="tag36h11", nthreads=2, quad_decimate=2.0)
+        at = apriltag_detector()
 
         def run_at(img):
             # AprilTag 3 order to OpenCV order, and its pixel centres sit at +0.5
@@ -100,7 +113,7 @@ def corner_alignment(c, gt):
 
 
 def pose_of(method: str, corners, camera: Camera):
-    if method == "visloc":
+    if method.startswith("visloc"):
         p = estimate_marker_pose(corners, MARKER_LENGTH, camera)
         return p.R, p.t
     L = MARKER_LENGTH
@@ -190,13 +203,12 @@ def run_real(rounds):
         else:
             vl = MarkerDetector(dn)
             cv_det = opencv_detector(dn, False)
-        found = {"visloc": [(d.id, d.corners) for d in vl.detect(img)]}
+        found = {"visloc": [(d.id, d.corners) for d in vl.detect(img)],
+                 "visloc_fast": [(d.id, d.corners) for d in MarkerDetector(vl.dictionary, passes=FAST_PASSES).detect(img)]}
         c, ids, _ = cv_det.detectMarkers(img)
         found["opencv"] = [] if ids is None else [(int(i), cc.reshape(4, 2)) for cc, i in zip(c, ids.ravel())]
         if dn == "DICT_APRILTAG_36h11":
-            import pupil_apriltags
-
-            at = pupil_apriltags.Detector(families="tag36h11", nthreads=2)
+            at = apriltag_detector()
             found["apriltag3"] = [(int(d.tag_id), d.corners[[1, 0, 3, 2]] - 0.5) for d in at.detect(img)]
         row = {"file": im["file"], "dictionary": dn}
         for m, dets in found.items():
@@ -227,15 +239,17 @@ def run_negatives():
 
     names = ["astronaut", "camera", "coffee", "chelsea", "rocket", "brick", "grass", "gravel", "coins", "moon", "page", "text"]
     dicts = ["DICT_4X4_50", "DICT_6X6_250", "DICT_APRILTAG_36h11"]
-    fp = {"visloc": 0, "opencv": 0}
+    fp = {"visloc": 0, "visloc_fast": 0, "opencv": 0}
     for dn in dicts:
         vl = MarkerDetector(dn)
+        vf = MarkerDetector(dn, passes=FAST_PASSES)
         cvd = opencv_detector(dn, False)
         for n in names:
             img = getattr(data, n)()
             if img.ndim == 3:
                 img = cv2.cvtColor(img[..., :3], cv2.COLOR_RGB2GRAY)
             fp["visloc"] += len(vl.detect(img))
+            fp["visloc_fast"] += len(vf.detect(img))
             ids = cvd.detectMarkers(img)[1]
             fp["opencv"] += 0 if ids is None else len(ids)
     return {"images": len(names), "dictionaries": dicts, "false_positives": fp}
@@ -271,7 +285,7 @@ def markdown(result) -> str:
     lines.append("| file | method | detections | expected found | reference tags found | max corner diff px |")
     lines.append("|---|---|---|---|---|---|")
     for row in result["real"]:
-        for m in ("visloc", "opencv", "apriltag3"):
+        for m in ("visloc", "visloc_fast", "opencv", "apriltag3"):
             if m not in row:
                 continue
             r = row[m]
@@ -280,7 +294,8 @@ def markdown(result) -> str:
             lines.append(f"| {row['file']} | {m} | {r['detections']} | {exp} | {ref} | {fmt(r.get('max_corner_diff_px'), 2)} |")
     neg = result["negatives"]
     lines.append(f"\nMarker-free real photos ({neg['images']} scikit-image images x {len(neg['dictionaries'])} dictionaries): "
-                 f"false positives visloc {neg['false_positives']['visloc']}, OpenCV {neg['false_positives']['opencv']}.")
+                 f"false positives visloc {neg['false_positives']['visloc']}, visloc_fast {neg['false_positives']['visloc_fast']}, "
+                 f"OpenCV {neg['false_positives']['opencv']}.")
     return "\n".join(lines) + "\n"
 
 

@@ -14,7 +14,7 @@ from typing import NoReturn
 
 from visloc import __version__
 
-__all__ = ["main", "build_parser", "UsageError"]
+__all__ = ["UsageError", "build_parser", "main"]
 
 
 class UsageError(ValueError):
@@ -26,7 +26,7 @@ def _positive(text: str) -> float:
         v = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not v > 0 or v != v or v == float("inf"):
+    if not (0 < v < float("inf")):  # also rejects NaN
         raise argparse.ArgumentTypeError(f"must be a positive finite number, got {text!r}")
     return v
 

@@ -22,7 +22,7 @@ from visloc.markers import MarkerDetector
 from visloc.pose import Camera, estimate_marker_pose, pose_error
 from visloc.types import MarkerDetection, Pose
 
-__all__ = ["detect", "render", "demo", "marker_records"]
+__all__ = ["demo", "detect", "marker_records", "render"]
 
 
 def _warn(command: str, text: str) -> None:

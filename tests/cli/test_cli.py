@@ -80,7 +80,7 @@ def test_detect_video(tmp_path):
 
 
 def test_explain_writes_stage_pictures(rendered, tmp_path):
-    img = sorted(rendered.glob("frame_*.png"))[0]
+    img = min(rendered.glob("frame_*.png"))
     assert main(["detect", str(img), "--explain", str(tmp_path / "ex"), "--quiet"]) == 0
     names = {p.name for p in (tmp_path / "ex").iterdir()}
     assert "frame_000000_I_detections.png" in names and "frame_000000_candidates.json" in names

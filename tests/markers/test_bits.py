@@ -3,7 +3,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from visloc.markers.bits import CellSample, decode, otsu_threshold, read_bits, sample_cells, square_to_quad
+from visloc.markers.bits import (
+    CellSample,
+    decode,
+    otsu_threshold,
+    read_bits,
+    sample_cells,
+    square_to_quad,
+)
 from visloc.markers.dictionary import load_dictionary
 
 

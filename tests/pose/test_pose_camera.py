@@ -13,7 +13,7 @@ from visloc.types import Pose
 
 ROOT = Path(__file__).resolve().parents[2]
 CALIB = ROOT / "calib"
-SHARED_TUTORIAL = ROOT.parent / "shared" / "data" / "real-markers" / "tutorial_camera_params.yml"
+REAL_TUTORIAL = ROOT / "datasets" / "real" / "tutorial_camera_params.yml"
 
 K = np.array([[600.0, 0.0, 319.5], [0.0, 610.0, 239.5], [0.0, 0.0, 1.0]])
 # strong but invertible over a 640x480 image (barrel, tangential, k3)
@@ -127,9 +127,8 @@ def test_calib_files() -> None:
     np.testing.assert_allclose(tutorial.dist[:2], [0.0995485, -0.206384])
 
 
-@pytest.mark.skipif(not SHARED_TUTORIAL.exists(), reason="shared data not beside the repo")
-def test_shared_tutorial_file_matches_the_copy() -> None:
-    a = Camera.from_file(SHARED_TUTORIAL)
+def test_tutorial_file_matches_the_copy_beside_the_photographs() -> None:
+    a = Camera.from_file(REAL_TUTORIAL)
     b = Camera.from_file(CALIB / "opencv_tutorial_camera.yml")
     np.testing.assert_array_equal(a.K, b.K)
     np.testing.assert_array_equal(a.dist, b.dist)

@@ -1,6 +1,20 @@
 """Square fiducial markers: the report's staged detector (Appendix G) and dictionaries."""
 
-from visloc.markers.detector import DetectionTrace, DetectorParams, MarkerDetector
+from visloc.markers.detector import (
+    FAST_PASSES,
+    DetectionTrace,
+    DetectorParams,
+    MarkerDetector,
+    SearchPass,
+)
 from visloc.markers.dictionary import Dictionary, load_dictionary
 
-__all__ = ["DetectionTrace", "DetectorParams", "Dictionary", "MarkerDetector", "load_dictionary"]
+__all__ = [
+    "FAST_PASSES",
+    "DetectionTrace",
+    "DetectorParams",
+    "Dictionary",
+    "MarkerDetector",
+    "SearchPass",
+    "load_dictionary",
+]

@@ -32,7 +32,7 @@ from visloc.markers.dictionary import Dictionary, load_dictionary
 from visloc.markers.refine import refine_quads
 from visloc.types import MarkerDetection
 
-__all__ = ["CandidateTrace", "DetectionTrace", "DetectorParams", "MarkerDetector", "PassTrace", "SearchPass"]
+__all__ = ["FAST_PASSES", "CandidateTrace", "DetectionTrace", "DetectorParams", "MarkerDetector", "PassTrace", "SearchPass"]
 
 
 @dataclass(frozen=True)
@@ -51,6 +51,11 @@ class SearchPass:
 
     scale: float = 1.0
     window: int | None = None
+
+
+#: Search passes trading recall on the smallest markers for speed: the fine pass on an image
+#: shrunk 1.5 times, the coarse pass at 3 times (``MarkerDetector(d, passes=FAST_PASSES)``).
+FAST_PASSES = (SearchPass(1.5, 9), SearchPass(3.0, 9))
 
 
 @dataclass(frozen=True)
@@ -78,7 +83,11 @@ class DetectorParams:
     refine : bool
         Stage 8 on/off.
     refine_radius : int or None
-        Stage 8 profile half-width, px; ``None`` = 0.4 cell, clipped to [1, 3].
+        Stage 8 profile half-width, px; ``None`` = 0.4 cell, clipped to [1, refine_max_radius].
+    refine_max_radius : int
+        Largest automatic profile half-width, px (wider profiles follow stronger blur).
+    refine_profiles : int
+        Stage 8 profiles across each side (more average more noise away).
     refine_iterations : int
         Stage 8 passes.
     border_error_rate : float
@@ -97,6 +106,8 @@ class DetectorParams:
     refine: bool = True
     refine_radius: int | None = None
     refine_iterations: int = 2
+    refine_max_radius: int = 5
+    refine_profiles: int = 24
     border_error_rate: float = 0.35
     error_correction_rate: float = 0.6
 
@@ -290,8 +301,9 @@ class MarkerDetector:
         corners, refined = quads, np.zeros(len(quads), bool)
         if p.refine:  # stage 8, batched
             side = np.sqrt(np.abs(_areas(quads)))
-            radii = p.refine_radius or np.clip(np.round(0.4 * side / n_cells), 1, 3).astype(int)
-            corners, refined = refine_quads(gray, quads, radius=radii, iterations=p.refine_iterations)
+            radii = p.refine_radius or np.clip(np.round(0.4 * side / n_cells), 1, p.refine_max_radius).astype(int)
+            corners, refined = refine_quads(gray, quads, radius=radii, iterations=p.refine_iterations,
+                                            count=p.refine_profiles)
         cells = sample_cells(gray, corners, n_cells)  # stage 9, batched
         valid, bits, margin, contrast = read_bits(cells, p.border_error_rate)
         ids, shift, hamming, matched = decode(bits, self.dictionary, p.error_correction_rate)  # 10

@@ -1,0 +1,67 @@
+"""Argument checks shared by the synthetic renderers (messages name the argument)."""
+
+from __future__ import annotations
+
+import numbers
+
+import numpy as np
+from numpy.typing import NDArray
+
+
+def check_camera(K: object) -> NDArray[np.float64]:
+    """Return ``K`` as a (3, 3) float64 pinhole matrix or raise naming ``K``."""
+    try:
+        k = np.array(K, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"K must be a (3, 3) array of numbers, got {type(K).__name__}") from exc
+    if k.shape != (3, 3):
+        raise ValueError(f"K must have shape (3, 3), got {k.shape}")
+    if not np.all(np.isfinite(k)):
+        raise ValueError("K must be finite")
+    if k[0, 0] <= 0 or k[1, 1] <= 0 or not np.allclose(k[2], [0.0, 0.0, 1.0]):
+        raise ValueError(f"K must have fx > 0, fy > 0 and last row [0, 0, 1], got {k.tolist()}")
+    return k
+
+
+def check_size(size: object) -> tuple[int, int]:
+    """Return ``size`` as ``(width, height)`` ints >= 8 or raise naming ``size``."""
+    if not isinstance(size, (tuple, list)) or len(size) != 2:
+        raise TypeError(f"size must be a (width, height) pair, got {size!r}")
+    if not all(isinstance(v, numbers.Integral) and not isinstance(v, bool) for v in size):
+        raise TypeError(f"size must hold two ints, got {size!r}")
+    w, h = int(size[0]), int(size[1])
+    if w < 8 or h < 8:
+        raise ValueError(f"size must be at least (8, 8), got {(w, h)}")
+    return w, h
+
+
+def check_number(
+    value: object,
+    name: str,
+    *,
+    low: float | None = None,
+    high: float | None = None,
+    low_open: bool = False,
+    high_open: bool = False,
+) -> float:
+    """Return ``value`` as a finite float in the given range or raise naming ``name``."""
+    if not isinstance(value, numbers.Real) or isinstance(value, bool):
+        raise TypeError(f"{name} must be a number, got {type(value).__name__}")
+    v = float(value)
+    if not np.isfinite(v):
+        raise ValueError(f"{name} must be finite, got {v}")
+    if low is not None and (v < low or (low_open and v == low)):
+        raise ValueError(f"{name} must be {'>' if low_open else '>='} {low}, got {v}")
+    if high is not None and (v > high or (high_open and v == high)):
+        raise ValueError(f"{name} must be {'<' if high_open else '<='} {high}, got {v}")
+    return v
+
+
+def check_int(value: object, name: str, *, low: int | None = None, high: int | None = None) -> int:
+    """Return ``value`` as an int in ``[low, high]`` or raise naming ``name``."""
+    if not isinstance(value, numbers.Integral) or isinstance(value, bool):
+        raise TypeError(f"{name} must be an int, got {type(value).__name__}")
+    v = int(value)
+    if (low is not None and v < low) or (high is not None and v > high):
+        raise ValueError(f"{name} must be in [{low}, {high}], got {v}")
+    return v

@@ -1,0 +1,254 @@
+"""Write synthetic marker datasets to disk: PNG frames or an MP4 video, plus ground truth.
+
+Layout of a dataset directory::
+
+    frame_0000.png, frame_0001.png, ...   8-bit grey images
+    ground_truth.json                     see :func:`render_dataset`
+    camera.yml                            OpenCV FileStorage: camera_matrix,
+                                          distortion_coefficients, image_width, image_height
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from visloc.markers.dictionary import Dictionary, load_dictionary
+from visloc.synth._checks import check_int, check_number, check_size
+from visloc.synth.markers import MarkerRender, render_markers
+from visloc.synth.scenes import DIFFICULTIES, MARKER_LENGTH, default_camera, random_scene
+from visloc.synth.textures import make_background
+from visloc.types import Pose
+
+FloatArray = NDArray[np.float64]
+
+
+def write_camera_yml(path: str | Path, K: FloatArray, size: tuple[int, int]) -> Path:
+    """Write an OpenCV FileStorage YAML camera file (zero distortion) and return its path."""
+    path = Path(path)
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    try:
+        fs.write("image_width", int(size[0]))
+        fs.write("image_height", int(size[1]))
+        fs.write("camera_matrix", np.asarray(K, np.float64))
+        fs.write("distortion_coefficients", np.zeros((1, 5)))
+    finally:
+        fs.release()
+    return path
+
+
+def _frame_record(name: str, render: MarkerRender) -> dict:
+    return {
+        "file": name,
+        "params": dict(render.params),
+        "markers": [m.to_dict() for m in render.markers],
+    }
+
+
+def _header(dic: Dictionary, size: tuple[int, int], K: FloatArray, length: float) -> dict:
+    return {
+        "dictionary": dic.name,
+        "size": [int(size[0]), int(size[1])],
+        "camera": {"K": np.asarray(K).tolist(), "dist": [0.0] * 5},
+        "marker_length": float(length),
+    }
+
+
+def _check_progress(progress: object) -> None:
+    if progress is not None and not callable(progress):
+        raise TypeError(f"progress must be a callable or None, got {type(progress).__name__}")
+
+
+def render_dataset(
+    outdir: str | Path,
+    n: int,
+    *,
+    seed: int = 1,
+    size: tuple[int, int] = (640, 480),
+    dictionary: str | Dictionary = "DICT_4X4_50",
+    difficulty: str = "easy",
+    progress: Callable[[int], object] | None = None,
+) -> Path:
+    """Render ``n`` random scenes to ``outdir`` with ground truth and a camera file.
+
+    Frame ``i`` is ``random_scene(np.random.default_rng([seed, i]), ...)``, so it does not
+    depend on ``n``.
+
+    Parameters
+    ----------
+    outdir : str or Path
+        Directory to write into (created if missing; existing files are overwritten).
+    n : int
+        Number of frames (>= 1).
+    seed : int
+        Seed of the dataset.
+    size, dictionary, difficulty
+        As in :func:`random_scene`.
+    progress : callable or None
+        Called as ``progress(i)`` after frame ``i`` is written.
+
+    Returns
+    -------
+    Path
+        ``outdir``. ``ground_truth.json`` holds ``dictionary``, ``size`` ``[w, h]``,
+        ``camera`` ``{"K", "dist"}``, ``marker_length``, ``difficulty``, ``seed`` and
+        ``frames``: per frame ``file``, ``params`` and ``markers`` (``id``, ``corners`` (4 x
+        [x, y], OpenCV order), ``rvec``, ``tvec``, ``length``, ``visible``).
+    """
+    n = check_int(n, "n", low=1)
+    seed = check_int(seed, "seed", low=0)
+    w, h = check_size(size)
+    if difficulty not in DIFFICULTIES:
+        raise ValueError(f"difficulty must be one of {DIFFICULTIES}, got {difficulty!r}")
+    _check_progress(progress)
+    dic = load_dictionary(dictionary)
+    out = Path(outdir)
+    out.mkdir(parents=True, exist_ok=True)
+    K = default_camera((w, h))
+    gt = _header(dic, (w, h), K, MARKER_LENGTH) | {"difficulty": difficulty, "seed": seed}
+    frames = []
+    for i in range(n):
+        render = random_scene(np.random.default_rng([seed, i]), size=(w, h), dictionary=dic,
+                              difficulty=difficulty)
+        name = f"frame_{i:04d}.png"
+        if not cv2.imwrite(str(out / name), render.image):
+            raise OSError(f"could not write {out / name}")
+        frames.append(_frame_record(name, render))
+        if progress is not None:
+            progress(i)
+    gt["frames"] = frames
+    (out / "ground_truth.json").write_text(json.dumps(gt, indent=1))
+    write_camera_yml(out / "camera.yml", K, (w, h))
+    return out
+
+
+def _ground_background(K: FloatArray, T_cam_world: Pose, size: tuple[int, int],
+                       texture: FloatArray, texel: float) -> FloatArray:
+    """The ground plane ``Z = 0`` (world frame), textured, seen by the camera."""
+    th, tw = texture.shape
+    # Texture pixel (u, v) sits at world (X, Y) = ((u - tw/2) * texel, (th/2 - v) * texel).
+    tex_to_world = np.array([[texel, 0.0, -0.5 * tw * texel], [0.0, -texel, 0.5 * th * texel],
+                             [0.0, 0.0, 1.0]])
+    R, t = T_cam_world.R, T_cam_world.t
+    world_to_img = K @ np.c_[R[:, 0], R[:, 1], t]
+    return cv2.warpPerspective(texture, world_to_img @ tex_to_world, size,
+                               flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+
+
+def render_video(
+    path: str | Path,
+    n: int,
+    *,
+    seed: int = 1,
+    size: tuple[int, int] = (320, 240),
+    dictionary: str | Dictionary = "DICT_4X4_50",
+    n_markers: int = 4,
+    fps: float = 30.0,
+    ground_truth: str | Path | None = None,
+    progress: Callable[[int], object] | None = None,
+) -> Path:
+    """Render a video of a camera flying smoothly over markers lying on textured ground.
+
+    The camera looks down from about 0.8 m and moves along a row of ``n_markers`` markers
+    (side :data:`MARKER_LENGTH`, 0.5 m apart, random ids and yaw) from before the first to
+    past the last, with slow sinusoidal roll, pitch, yaw and height changes. Frames are clean
+    (blur sigma 0.5 px, noise 1.5); the MP4 codec adds its own loss.
+
+    Parameters
+    ----------
+    path : str or Path
+        Output video file (``.mp4``, codec ``mp4v``).
+    n : int
+        Number of frames (>= 2).
+    seed : int
+        Seed of the marker layout, background and noise.
+    size : (int, int)
+        ``(width, height)``.
+    dictionary : str or Dictionary
+        Marker dictionary.
+    n_markers : int
+        Number of markers (1 to the dictionary size).
+    fps : float
+        Frame rate written into the video and used for the frame times.
+    ground_truth : str, Path or None
+        Where to write the ground truth; default ``ground_truth.json`` beside the video.
+    progress : callable or None
+        Called as ``progress(i)`` after frame ``i`` is written.
+
+    Returns
+    -------
+    Path
+        ``path``. The ground truth has the form of :func:`render_dataset`'s; each frame
+        record has ``file`` ``"<video name>#<i>"``, ``index``, ``time`` (s), and markers
+        outside the view are listed with ``visible: false``.
+    """
+    n = check_int(n, "n", low=2)
+    seed = check_int(seed, "seed", low=0)
+    w, h = check_size(size)
+    dic = load_dictionary(dictionary)
+    n_markers = check_int(n_markers, "n_markers", low=1, high=len(dic))
+    fps = check_number(fps, "fps", low=0.0, low_open=True)
+    _check_progress(progress)
+    path = Path(path)
+    gt_path = Path(ground_truth) if ground_truth is not None else path.parent / "ground_truth.json"
+    rng = np.random.default_rng(seed)
+    K = default_camera((w, h))
+    ids = rng.choice(len(dic), size=n_markers, replace=False)
+    spacing = 0.5
+    T_world_marker = [
+        Pose(_rot_z(rng.uniform(0, 2 * np.pi)),
+             np.array([k * spacing, rng.uniform(-0.12, 0.12), 0.0]))
+        for k in range(n_markers)
+    ]
+    texture, _ = make_background("noise", (512, 512), rng)
+    texture = texture.astype(np.float32)
+    phase = rng.uniform(0, 2 * np.pi, 4)
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (w, h), isColor=False)
+    if not writer.isOpened():
+        raise OSError(f"could not open {path} for writing an mp4v video")
+    gt = _header(dic, (w, h), K, MARKER_LENGTH) | {"seed": seed, "video": path.name, "fps": fps}
+    frames = []
+    try:
+        for i in range(n):
+            s = i / (n - 1)
+            wob = np.sin(2 * np.pi * s + phase)
+            # Camera position in the world (Z up) and attitude: looking straight down, then
+            # small yaw / pitch / roll; T_cam_world maps world points into the camera frame.
+            centre = np.array([-0.6 + s * ((n_markers - 1) * spacing + 1.2), 0.08 * wob[0],
+                               0.8 + 0.05 * wob[1]])
+            R_world_cam = _rot_z(0.15 * wob[2]) @ _rot_x(np.pi + 0.05 * wob[3])
+            T_cam_world = Pose(R_world_cam.T, -R_world_cam.T @ centre)
+            bg = _ground_background(K, T_cam_world, (w, h), texture, 0.004)
+            placements = [(int(mid), T_cam_world.compose(T), MARKER_LENGTH)
+                          for mid, T in zip(ids, T_world_marker, strict=True)]
+            render = render_markers(K, (w, h), placements, dic,
+                                    background=np.clip(np.rint(bg), 0, 255).astype(np.uint8),
+                                    blur_sigma=0.5, noise_sigma=1.5, rng=rng)
+            writer.write(render.image)
+            rec = _frame_record(f"{path.name}#{i}", render)
+            rec["params"]["background"] = "noise (ground plane)"
+            frames.append({"index": i, "time": i / fps} | rec)
+            if progress is not None:
+                progress(i)
+    finally:
+        writer.release()
+    gt["frames"] = frames
+    gt_path.write_text(json.dumps(gt, indent=1))
+    return path
+
+
+def _rot_z(angle: float) -> FloatArray:
+    """Rotation matrix about z by ``angle`` rad."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _rot_x(angle: float) -> FloatArray:
+    """Rotation matrix about x by ``angle`` rad."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])

@@ -1,0 +1,375 @@
+"""Render square fiducial markers with exact ground truth.
+
+A marker is its dictionary bit pattern inside a black border one cell wide (the black square
+of side ``L``), surrounded by a white quiet zone ``margin_cells`` cells wide, printed on a
+plane. Its pose maps marker-frame points into the camera frame (:mod:`visloc.types`), and its
+ground-truth corners are the pinhole projections of ``(-L/2, L/2, 0), (L/2, L/2, 0),
+(L/2, -L/2, 0), (-L/2, -L/2, 0)``: top-left, top-right, bottom-right, bottom-left of the
+marker as :func:`cv2.aruco.generateImageMarker` draws it.
+
+Every pixel's value is the integral of the printed plane over the pixel's square (box
+filter), with pixel centres at integer coordinates. By default the integral is computed
+exactly from the projected cell polygons (:mod:`visloc.synth.raster`), so the edges sit where
+the ground truth says to ~1e-6 px; ``supersample=S`` instead point-samples S x S positions per
+pixel with :func:`cv2.warpPerspective` and averages them (edge error up to ``1 / (2 S)`` px),
+which serves as an independent cross-check.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from visloc.markers.dictionary import Dictionary, load_dictionary
+from visloc.synth._checks import check_camera, check_int, check_number, check_size
+from visloc.synth.raster import polygon_coverage
+from visloc.synth.textures import degrade, make_background
+from visloc.types import Pose
+
+FloatArray = NDArray[np.float64]
+
+#: Black and white grey levels of the print.
+BLACK, WHITE = 0.0, 255.0
+#: Corners must lie at least this far (px) inside the image border for ``visible``.
+VISIBLE_MARGIN = 2.0
+
+Placement = tuple[int, Pose, float]
+
+
+@dataclass(frozen=True, eq=False)
+class RenderedMarker:
+    """Ground truth of one marker in a render.
+
+    Attributes
+    ----------
+    id : int
+        Index of the marker in its dictionary.
+    corners : ndarray (4, 2) float64
+        Exact image corners of the black square, clockwise from the marker's own top-left
+        (OpenCV order), pixel centres at integer coordinates.
+    pose : Pose
+        Marker-to-camera transform, ``p_cam = R @ p_marker + t``.
+    length : float
+        Side of the black square (border included), metres.
+    visible : bool
+        All four corners in front of the camera and at least 2 px inside the image border
+        (within ``[1.5, W - 2.5] x [1.5, H - 2.5]``), and the printed face towards the camera.
+    """
+
+    id: int
+    corners: FloatArray
+    pose: Pose
+    length: float
+    visible: bool
+
+    def to_dict(self) -> dict:
+        """JSON-ready ground truth: ``id``, ``corners``, ``rvec``, ``tvec``, ``length``, ``visible``."""
+        return {
+            "id": int(self.id),
+            "corners": [[float(x), float(y)] for x, y in self.corners],
+            "rvec": [float(v) for v in self.pose.rvec],
+            "tvec": [float(v) for v in self.pose.t],
+            "length": float(self.length),
+            "visible": bool(self.visible),
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class MarkerRender:
+    """A synthetic image and its ground truth.
+
+    Attributes
+    ----------
+    image : ndarray (H, W) uint8
+        The rendered, degraded grey image.
+    markers : list of RenderedMarker
+        Ground truth of every placement, in the order given (drawn or not).
+    K : ndarray (3, 3)
+        Camera matrix (no distortion).
+    dictionary : str
+        Name of the marker dictionary.
+    params : dict
+        The rendering options and degradations used (JSON-ready values).
+    """
+
+    image: NDArray[np.uint8]
+    markers: list[RenderedMarker]
+    K: FloatArray
+    dictionary: str
+    params: dict = field(default_factory=dict)
+
+
+def marker_object_points(length: float) -> FloatArray:
+    """Marker-frame corners ``(4, 3)`` of a marker of side ``length``, in corner order."""
+    h = 0.5 * float(length)
+    return np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
+
+
+def project_points(K: FloatArray, pose: Pose, points: FloatArray) -> FloatArray:
+    """Pinhole projection ``(N, 2)`` of marker-frame points ``(N, 3)`` (no distortion)."""
+    pc = pose.apply(points)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        uv = pc @ np.asarray(K, float).T
+        return uv[:, :2] / uv[:, 2:3]
+
+
+def faces_camera(pose: Pose) -> bool:
+    """True when the camera is on the printed (+z) side of the marker plane."""
+    return bool(np.dot(pose.t, pose.R[:, 2]) < 0.0)
+
+
+def _plane_polygons(bits: NDArray[np.uint8], length: float, margin_cells: float):
+    """Polygons of one marker in its plane: the quiet-zone square, and the white parts.
+
+    Returns ``(outer, polys, weights)``: ``outer`` (4, 2) plane corners of the printed area;
+    ``sum(weights[k] * [inside polys[k]])`` is 1 on white print, 0 on black and outside.
+    """
+    s = bits.shape[0]
+    cell = length / (s + 2)
+    h = 0.5 * length
+    ho = h + margin_cells * cell
+
+    def rect(x0: float, x1: float, y0: float, y1: float) -> FloatArray:
+        return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
+
+    outer = rect(-ho, ho, ho, -ho)
+    polys = [outer, rect(-h, h, h, -h)]
+    weights = [1.0, -1.0]
+    for i in range(s):  # one rectangle per horizontal run of white cells
+        row = np.concatenate([[0], bits[i].astype(np.int8), [0]])
+        starts = np.flatnonzero(np.diff(row) == 1)
+        stops = np.flatnonzero(np.diff(row) == -1)
+        y_top, y_bot = h - (1 + i) * cell, h - (2 + i) * cell
+        for a, b in zip(starts, stops, strict=True):
+            polys.append(rect(-h + (1 + a) * cell, -h + (1 + b) * cell, y_top, y_bot))
+            weights.append(1.0)
+    return outer, polys, weights
+
+
+def _project_clipped(K: FloatArray, pose: Pose, poly: FloatArray, near: float) -> FloatArray:
+    """Project a plane polygon (n, 2), clipped to the half-space ``z >= near``."""
+    pts = pose.apply(np.c_[poly, np.zeros(len(poly))])
+    if np.all(pts[:, 2] >= near):
+        kept = pts
+    else:  # Sutherland-Hodgman against the near plane
+        out = []
+        for a, b in zip(pts, np.roll(pts, -1, axis=0), strict=True):
+            if a[2] >= near:
+                out.append(a)
+            if (a[2] >= near) != (b[2] >= near):
+                out.append(a + (near - a[2]) / (b[2] - a[2]) * (b - a))
+        if len(out) < 3:
+            return np.zeros((0, 2))
+        kept = np.array(out)
+    uv = kept @ K.T
+    return uv[:, :2] / uv[:, 2:3]
+
+
+def _draw_exact(canvas: FloatArray, K: FloatArray, pose: Pose, bits, length, margin) -> None:
+    """Composite one marker onto ``canvas`` in place with exact area coverage."""
+    outer, polys, weights = _plane_polygons(bits, length, margin)
+    near = 1e-6 * length
+    img_outer = _project_clipped(K, pose, outer, near)
+    if len(img_outer) == 0:
+        return
+    h, w = canvas.shape
+    c0 = int(np.clip(np.floor(img_outer[:, 0].min() + 0.5), 0, w))
+    c1 = int(np.clip(np.ceil(img_outer[:, 0].max() + 0.5), 0, w))
+    r0 = int(np.clip(np.floor(img_outer[:, 1].min() + 0.5), 0, h))
+    r1 = int(np.clip(np.ceil(img_outer[:, 1].max() + 0.5), 0, h))
+    if c1 <= c0 or r1 <= r0:
+        return
+    shift = np.array([c0, r0], float)
+    shape = (r1 - r0, c1 - c0)
+    alpha = polygon_coverage([img_outer - shift], [1.0], shape)
+    white = polygon_coverage(
+        [_project_clipped(K, pose, p, near) - shift for p in polys], weights, shape
+    )
+    view = canvas[r0:r1, c0:c1]
+    view *= 1.0 - alpha
+    view += BLACK * (alpha - white) + WHITE * white
+
+
+def _draw_sampled(canvas: FloatArray, K: FloatArray, pose: Pose, bits, length, margin, s: int):
+    """Composite one marker onto the ``s``-times supersampled ``canvas`` by point sampling."""
+    n = bits.shape[0] + 2
+    cell = length / n
+    ho = 0.5 * length + margin * cell
+    if np.any(pose.apply(np.c_[_plane_polygons(bits, length, margin)[0], np.zeros(4)])[:, 2] <= 0):
+        return  # the homography is only valid for a plane entirely in front of the camera
+    # Supersampled pixel (c, r) has image coordinate x = (c + 0.5) / s - 0.5.
+    to_super = np.array([[s, 0.0, 0.5 * s - 0.5], [0.0, s, 0.5 * s - 0.5], [0.0, 0.0, 1.0]])
+    plane_to_img = K @ np.c_[pose.R[:, 0], pose.R[:, 1], pose.t]
+    # Cell-pattern pixel (u, v) covers u - 0.5 .. u + 0.5, i.e. cell u of the marker.
+    cells_to_plane = np.array(
+        [[cell, 0.0, -0.5 * length + 0.5 * cell], [0.0, -cell, 0.5 * length - 0.5 * cell], [0, 0, 1]]
+    )
+    square_to_plane = np.diag([2.0 * ho, -2.0 * ho, 1.0])  # a 1x1 image onto the outer square
+    hs, ws = canvas.shape
+    flags = cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP
+    pattern = (np.pad(bits, 1) * WHITE + (1 - np.pad(bits, 1)) * BLACK).astype(np.float32)
+    inv = np.linalg.inv(to_super @ plane_to_img @ cells_to_plane)
+    value = cv2.warpPerspective(pattern, inv, (ws, hs), flags=flags,
+                                borderMode=cv2.BORDER_CONSTANT, borderValue=WHITE)
+    inv = np.linalg.inv(to_super @ plane_to_img @ square_to_plane)
+    inside = cv2.warpPerspective(np.ones((1, 1), np.uint8), inv, (ws, hs), flags=flags,
+                                 borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    np.copyto(canvas, value, where=inside.astype(bool))
+
+
+def _check_placements(placements: object, dictionary: Dictionary) -> list[Placement]:
+    if not isinstance(placements, Sequence) or isinstance(placements, (str, bytes)):
+        raise TypeError(f"placements must be a list of (id, Pose, length), got {type(placements).__name__}")
+    out = []
+    for i, item in enumerate(placements):
+        if not isinstance(item, Sequence) or len(item) != 3:
+            raise TypeError(f"placements[{i}] must be an (id, Pose, length) triple, got {item!r}")
+        marker_id = check_int(item[0], f"placements[{i}] id", low=0, high=len(dictionary) - 1)
+        if not isinstance(item[1], Pose):
+            raise TypeError(f"placements[{i}] pose must be a visloc.types.Pose, got {type(item[1]).__name__}")
+        pose = item[1]
+        if np.shape(pose.R) != (3, 3) or np.shape(pose.t) != (3,):
+            raise ValueError(f"placements[{i}] pose must have R (3, 3) and t (3,)")
+        length = check_number(item[2], f"placements[{i}] length", low=0.0, low_open=True)
+        out.append((marker_id, Pose(np.asarray(pose.R, float), np.asarray(pose.t, float)), length))
+    return out
+
+
+def render_markers(
+    K: FloatArray,
+    size: tuple[int, int],
+    placements: Sequence[Placement],
+    dictionary: str | Dictionary,
+    *,
+    background: str | NDArray[np.uint8] | None = None,
+    supersample: int | None = None,
+    margin_cells: float = 1.0,
+    blur_sigma: float = 0.0,
+    motion_blur: float = 0.0,
+    motion_angle: float = 0.0,
+    noise_sigma: float = 0.0,
+    gain: float = 1.0,
+    gradient: float = 0.0,
+    jpeg_quality: int | None = None,
+    rng: np.random.Generator | int | None = None,
+) -> MarkerRender:
+    """Render markers seen by a pinhole camera, with exact ground-truth corners.
+
+    Parameters
+    ----------
+    K : ndarray (3, 3)
+        Camera matrix; no lens distortion.
+    size : (int, int)
+        ``(width, height)`` of the image.
+    placements : list of (int, Pose, float)
+        ``(id, pose, length)`` per marker: dictionary id, marker-to-camera pose and side of
+        the black square in metres. Markers behind the camera or seen from the back are not
+        drawn (their ground truth is still returned, with ``visible=False``); nearer markers
+        are drawn over farther ones.
+    dictionary : str or Dictionary
+        Marker dictionary (see :func:`visloc.markers.dictionary.load_dictionary`).
+    background : str, ndarray (H, W) uint8 or None
+        ``'grass'``, ``'gravel'``, ``'brick'`` (scikit-image textures), ``'noise'`` (smooth
+        random texture), ``'flat'`` (grey 128, the default) or an image of the render's size.
+    supersample : int or None
+        ``None`` (default): exact pixel area coverage. ``S >= 1``: point-sample ``S x S``
+        positions per pixel (supersampled pixel ``(r, c)`` at image coordinate
+        ``((c + 0.5) / S - 0.5, (r + 0.5) / S - 0.5)``) with :func:`cv2.warpPerspective`
+        and average them; markers partly behind the camera are then skipped.
+    margin_cells : float
+        Width of the white quiet zone around the black square, in cells (>= 0).
+    blur_sigma : float
+        Gaussian optical blur, standard deviation in pixels (>= 0).
+    motion_blur, motion_angle : float
+        Linear motion blur length in pixels (>= 0) and direction in radians.
+    noise_sigma : float
+        Standard deviation of additive Gaussian noise in grey levels (>= 0).
+    gain : float
+        Exposure factor (> 0); below 1 simulates dim light.
+    gradient : float
+        Strength in [0, 1) of a multiplicative illumination ramp falling from 1 to
+        ``1 - gradient`` across the image in a random direction.
+    jpeg_quality : int or None
+        JPEG round-trip quality in [1, 100], or ``None`` for none.
+    rng : numpy.random.Generator, int or None
+        Randomness for noise, gradient direction and textures (``np.random.default_rng(rng)``).
+
+    Returns
+    -------
+    MarkerRender
+        Image, per-placement ground truth, ``K`` and the parameters used.
+
+    Raises
+    ------
+    TypeError, ValueError
+        On a malformed argument; the message names it.
+    """
+    k = check_camera(K)
+    w, h = check_size(size)
+    dic = load_dictionary(dictionary)
+    items = _check_placements(placements, dic)
+    if supersample is not None:
+        supersample = check_int(supersample, "supersample", low=1, high=32)
+    margin_cells = check_number(margin_cells, "margin_cells", low=0.0)
+    blur_sigma = check_number(blur_sigma, "blur_sigma", low=0.0)
+    motion_blur = check_number(motion_blur, "motion_blur", low=0.0)
+    motion_angle = check_number(motion_angle, "motion_angle")
+    noise_sigma = check_number(noise_sigma, "noise_sigma", low=0.0)
+    gain = check_number(gain, "gain", low=0.0, low_open=True)
+    gradient = check_number(gradient, "gradient", low=0.0, high=1.0, high_open=True)
+    if jpeg_quality is not None:
+        jpeg_quality = check_int(jpeg_quality, "jpeg_quality", low=1, high=100)
+    if rng is not None and not isinstance(rng, (np.random.Generator, int, np.integer)):
+        raise TypeError(f"rng must be a numpy Generator, an int seed or None, got {type(rng).__name__}")
+    gen = np.random.default_rng(rng)
+
+    bg, bg_name = make_background(background, (w, h), gen)
+    markers = []
+    for marker_id, pose, length in items:
+        corners = project_points(k, pose, marker_object_points(length))
+        in_front = bool(np.all(pose.apply(marker_object_points(length))[:, 2] > 0))
+        inside = bool(
+            np.all(np.isfinite(corners))
+            and np.all(corners >= VISIBLE_MARGIN - 0.5)
+            and np.all(corners <= np.array([w, h]) - 0.5 - VISIBLE_MARGIN)
+        )
+        visible = in_front and inside and faces_camera(pose)
+        markers.append(RenderedMarker(marker_id, corners, pose, length, visible))
+
+    order = sorted(range(len(items)), key=lambda i: -float(np.linalg.norm(items[i][1].t)))
+    drawn = [i for i in order if faces_camera(items[i][1])]
+    if supersample is None:
+        canvas = bg
+        for i in drawn:
+            marker_id, pose, length = items[i]
+            _draw_exact(canvas, k, pose, dic.bits[marker_id], length, margin_cells)
+    else:
+        s = supersample
+        canvas = np.repeat(np.repeat(bg.astype(np.float32), s, axis=0), s, axis=1)
+        for i in drawn:
+            marker_id, pose, length = items[i]
+            _draw_sampled(canvas, k, pose, dic.bits[marker_id], length, margin_cells, s)
+        canvas = canvas.reshape(h, s, w, s).astype(np.float64).mean(axis=(1, 3))
+
+    image, grad_angle = degrade(
+        canvas, gen, blur_sigma=blur_sigma, motion_blur=motion_blur, motion_angle=motion_angle,
+        gradient=gradient, gain=gain, noise_sigma=noise_sigma, jpeg_quality=jpeg_quality,
+    )
+    params = {
+        "background": bg_name,
+        "supersample": supersample,
+        "margin_cells": margin_cells,
+        "blur_sigma": blur_sigma,
+        "motion_blur": motion_blur,
+        "motion_angle": motion_angle,
+        "noise_sigma": noise_sigma,
+        "gain": gain,
+        "gradient": gradient,
+        "gradient_angle": grad_angle,
+        "jpeg_quality": jpeg_quality,
+    }
+    return MarkerRender(image, markers, k, dic.name, params)

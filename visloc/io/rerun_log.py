@@ -28,8 +28,7 @@ import os
 import uuid
 from collections.abc import Sequence
 from pathlib import Path
-from types import TracebackType
-from typing import Any, Self
+from typing import Any
 
 import cv2
 import numpy as np
@@ -37,6 +36,7 @@ import rerun as rr
 from numpy.typing import NDArray
 
 from visloc.images import check_image
+from visloc.io.closing import Closing
 from visloc.types import MarkerDetection
 
 __all__ = ["RerunLogger"]
@@ -58,7 +58,7 @@ def _rgb(image: object) -> NDArray[np.uint8]:
     return img
 
 
-class RerunLogger:
+class RerunLogger(Closing):
     """Write a rerun recording (``.rrd`` file) of frames, marker detections and poses.
 
     Nothing is spawned or served: the recording goes straight to ``path`` and can be opened
@@ -282,13 +282,3 @@ class RerunLogger:
         self.recording.flush()
         self.recording.disconnect()
 
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()

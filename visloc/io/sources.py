@@ -21,13 +21,12 @@ import os
 import time as _time
 from abc import ABC, abstractmethod
 from collections.abc import Iterator, Sequence
-from types import TracebackType
-from typing import Self
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from visloc.io.closing import Closing
 from visloc.types import Frame
 
 __all__ = [
@@ -134,7 +133,7 @@ def read_image(path: str | os.PathLike[str]) -> tuple[NDArray[np.uint8] | None, 
         return None, f"cannot read image {name}: {exc}"
 
 
-class FrameSource(ABC):
+class FrameSource(Closing, ABC):
     """An iterable of :class:`visloc.types.Frame`; also a context manager that closes it.
 
     ``len(source)`` is the number of frames when it is known in advance (image lists, videos
@@ -176,16 +175,6 @@ class FrameSource(ABC):
         """Release the underlying resources; iterating afterwards raises ``ValueError``."""
         self._closed = True
 
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__}: {self.description}>"

@@ -15,14 +15,14 @@ import os
 import re
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from types import TracebackType
-from typing import Any, Self, TextIO
+from typing import Any, TextIO
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
 from visloc.images import check_image
+from visloc.io.closing import Closing
 from visloc.io.draw import draw_markers
 
 __all__ = ["AnnotationSink", "CsvWriter", "JsonlWriter", "draw_markers", "to_jsonable"]
@@ -89,25 +89,7 @@ def _open_text(path: str | os.PathLike[str], name: str, **kwargs: Any) -> tuple[
     return p, open(p, "w", encoding="utf-8", **kwargs)
 
 
-class _Closing:
-    """Context-manager protocol around ``close()``."""
-
-    def close(self) -> None:  # pragma: no cover - overridden
-        raise NotImplementedError
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
-
-
-class JsonlWriter(_Closing):
+class JsonlWriter(Closing):
     """Write one compact JSON object per line, flushing after every line.
 
     Parameters
@@ -173,7 +155,7 @@ def _csv_value(value: Any) -> Any:
     return value
 
 
-class CsvWriter(_Closing):
+class CsvWriter(Closing):
     """Write rows to a CSV file with a header line, flushing after every row.
 
     Parameters
@@ -251,7 +233,7 @@ def _frame_stem(name: str) -> str:
     return stem or "frame"
 
 
-class AnnotationSink(_Closing):
+class AnnotationSink(Closing):
     """Save annotated frames as a video or as one PNG per frame.
 
     If ``target`` ends with ``.mp4`` (codec ``mp4v``) or ``.avi`` (``MJPG``) the frames go

@@ -67,10 +67,12 @@ def rotations_and_rates(params: FloatArray) -> tuple[FloatArray, FloatArray]:
     return np.array(R), np.array(W)
 
 
-def _project(params: FloatArray, X: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, bool]:
+def _project(
+    params: FloatArray, X: FloatArray, R: FloatArray | None = None
+) -> tuple[FloatArray, FloatArray, FloatArray, bool]:
     """``q = R X`` (S, 3, N), normalized projections ``uv`` (S, 2, N), ``1/z`` (S, N) (``0``
     for points not in front of the camera) and whether there are any such points."""
-    q = rotations_and_rates(params)[0] @ X
+    q = (rotations_and_rates(params)[0] if R is None else R) @ X
     z = q[:, 2] + params[:, 2:3]
     behind = bool((z <= 0.0).any())
     if behind:
@@ -113,13 +115,7 @@ def residuals_and_jacobian(
     S = params.shape[0]
     N = X.shape[1]
     R, W = rotations_and_rates(params)
-    q = R @ X
-    z = q[:, 2] + params[:, 2:3]
-    behind = bool((z <= 0.0).any())
-    if behind:
-        z = np.where(z > 0.0, z, np.inf)
-    iz = 1.0 / z
-    uv = (q[:, :2] + params[:, :2, None]) * iz[:, None]
+    q, uv, iz, behind = _project(params, X, R)
     fiz = f * iz[:, None]  # (S, 2, N): f / z
     E = np.empty((S, 2, N, 7))
     # translation: d(x/z) = (dx - u dz) / z

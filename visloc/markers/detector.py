@@ -166,9 +166,6 @@ class _Cands:
     scales: list[float] = field(default_factory=list)
     splits: list[RadialSplit] = field(default_factory=list)
 
-    def subset(self, idx: NDArray[np.intp]) -> _Cands:
-        return _Cands(*([lst[i] for i in idx] for lst in (self.quads, self.contours, self.scales, self.splits)))
-
 
 class MarkerDetector:
     """Detect square fiducial markers of one dictionary.
@@ -295,7 +292,6 @@ class MarkerDetector:
                 cands.splits.append(res[1])
         if not cands.quads:
             return []
-        cands = cands.subset(_distinct(np.array(cands.quads)))
         quads = np.array(cands.quads)
         n_cells = self.dictionary.marker_size + 2
         corners, refined = quads, np.zeros(len(quads), bool)

@@ -273,7 +273,7 @@ def render_markers(
     dictionary : str or Dictionary
         Marker dictionary (see :func:`visloc.markers.dictionary.load_dictionary`).
     background : str, ndarray (H, W) uint8 or None
-        ``'grass'``, ``'gravel'``, ``'brick'`` (scikit-image textures), ``'noise'`` (smooth
+        ``'grass'``, ``'gravel'``, ``'brick'`` (CC0 photographs, see visloc/synth/data), ``'noise'`` (smooth
         random texture), ``'flat'`` (grey 128, the default) or an image of the render's size.
     supersample : int or None
         ``None`` (default): exact pixel area coverage. ``S >= 1``: point-sample ``S x S``

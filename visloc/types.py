@@ -205,3 +205,101 @@ class Pose:
         if self.covariance is not None:
             d["std"] = [float(v) for v in np.sqrt(np.clip(np.diag(self.covariance), 0, None))]
         return d
+
+
+@dataclass(frozen=True, eq=False)
+class FlowField:
+    """Sparse optical flow of image blocks between two frames.
+
+    Attributes
+    ----------
+    centers : ndarray (N, 2)
+        Block centres (x, y) in the first frame, pixel-centre convention.
+    vectors : ndarray (N, 2)
+        Displacement (dx, dy) of the image content of each block from the first frame to the
+        second, px.
+    confidence : ndarray (N,)
+        In [0, 1]: 0 for blocks without texture or with an ambiguous match.
+    block : int
+        Block side, px.
+    image_size : (int, int)
+        ``(width, height)`` of the frames.
+    """
+
+    centers: FloatArray
+    vectors: FloatArray
+    confidence: FloatArray
+    block: int
+    image_size: tuple[int, int]
+
+
+@dataclass(frozen=True, eq=False)
+class GlobalMotion:
+    """The image content's motion between two frames as a rotation plus a translation.
+
+    Attributes
+    ----------
+    translation : ndarray (2,)
+        Displacement (px) of the content at the image centre ``((W-1)/2, (H-1)/2)``.
+    rotation : float
+        Rotation (rad) of the content, positive turning image +x toward image +y.
+    scale : float
+        Scale change (1 = none; > 1 when the content grows, i.e. the camera descends).
+    center_of_rotation : ndarray (2,) or None
+        Centre of instantaneous rotation (px), ``None`` when the motion is a pure
+        translation (the centre is at infinity).
+    residual_rms : float
+        RMS of the flow vectors' residuals to the model, px, over the inliers.
+    inliers : int
+        Number of blocks used.
+    method : str
+        ``"similarity"`` or ``"cir"`` (report Appendix H).
+    """
+
+    translation: FloatArray
+    rotation: float
+    scale: float
+    center_of_rotation: FloatArray | None
+    residual_rms: float
+    inliers: int
+    method: str
+
+    def displacement_at(self, point: FloatArray, image_center: FloatArray) -> FloatArray:
+        """Content displacement (2,) at ``point`` (px) under this motion."""
+        c, s = np.cos(self.rotation) * self.scale, np.sin(self.rotation) * self.scale
+        r = np.asarray(point, float) - image_center
+        moved = np.array([c * r[0] - s * r[1], s * r[0] + c * r[1]])
+        return moved - r + self.translation
+
+
+@dataclass(frozen=True, eq=False)
+class GroundVelocity:
+    """Camera velocity over flat ground from two frames.
+
+    Attributes
+    ----------
+    v : ndarray (2,)
+        Camera velocity relative to the ground, m/s, in the first frame's camera axes: x right
+        and y down as in the image (a camera moving toward +x makes the content move toward
+        -x).
+    yaw_rate : float
+        Camera rotation rate about its +z axis (the optical axis, toward the ground),
+        rad/s, right-handed: positive turns camera +x toward camera +y.
+    quality : float
+        In [0, 1]; 0 when nothing could be measured (then ``v`` and ``yaw_rate`` are 0).
+    reason : str
+        Why the quality is low ("" when it is fine).
+    motion : GlobalMotion or None
+        The image motion it came from.
+    """
+
+    v: FloatArray
+    yaw_rate: float
+    quality: float
+    reason: str = ""
+    motion: GlobalMotion | None = None
+
+    def to_dict(self) -> dict:
+        """JSON-ready dict: ``vx``, ``vy``, ``yaw_rate``, ``quality``, ``reason``."""
+        return {"vx": float(self.v[0]), "vy": float(self.v[1]), "yaw_rate": float(self.yaw_rate),
+                "quality": float(self.quality), "reason": self.reason}

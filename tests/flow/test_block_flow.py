@@ -1,0 +1,69 @@
+import numpy as np
+import pytest
+
+from tests.flow.conftest import moved
+from visloc.flow import block_flow, default_block
+
+
+@pytest.mark.parametrize("dx, dy", [(3, 0), (0, -2), (7, 5), (-12, 9), (20, -15)])
+def test_integer_shifts(dx, dy):
+    a, b = moved(dx, dy)
+    f = block_flow(a, b)
+    good = f.confidence > 0.2
+    assert good.sum() >= 0.5 * len(good)
+    assert np.abs(np.median(f.vectors[good], axis=0) - (dx, dy)).max() < 0.02
+
+
+@pytest.mark.parametrize("dx, dy", [(0.25, 0.0), (1.5, -0.5), (5.5, 2.25), (-3.75, 0.6)])
+@pytest.mark.parametrize("mode", ["gradient", "intensity"])
+def test_subpixel_shifts(dx, dy, mode):
+    a, b = moved(dx, dy)
+    f = block_flow(a, b, mode=mode)
+    good = f.confidence > 0.2
+    err = f.vectors[good] - (dx, dy)
+    assert np.abs(np.median(err, axis=0)).max() < 0.08
+    assert np.percentile(np.abs(err), 90) < 0.2
+
+
+def test_layout_and_defaults():
+    a, b = moved(2, 1)
+    assert default_block(a.shape) == 40  # the report's 40 x 40 blocks at 320 x 240
+    f = block_flow(a, b)
+    assert f.block == 40 and f.image_size == (320, 240)
+    assert f.centers.shape == (48, 2) and f.vectors.shape == (48, 2) and f.confidence.shape == (48,)
+    assert np.allclose(f.centers[0], (19.5, 19.5))
+    g = block_flow(a, b, step=20)  # overlapping blocks
+    assert len(g.confidence) == 11 * 15
+
+
+def test_identical_and_uniform_frames():
+    a, _ = moved()
+    f = block_flow(a, a)
+    good = f.confidence > 0.2
+    assert good.any() and np.abs(f.vectors[good]).max() < 1e-6
+    flat = np.full((240, 320), 90, np.uint8)
+    g = block_flow(flat, flat)
+    assert (g.confidence == 0).all() and np.isfinite(g.vectors).all()
+
+
+@pytest.mark.parametrize(
+    "prev, curr, exc, word",
+    [
+        (np.zeros((240, 320), np.uint8), np.zeros((240, 321), np.uint8), ValueError, "same size"),
+        (np.zeros((240, 320), np.float32), np.zeros((240, 320), np.uint8), TypeError, "prev"),
+        (np.zeros((8, 8), np.uint8), np.zeros((8, 8), np.uint8), ValueError, "16 x 16"),
+    ],
+)
+def test_bad_frames(prev, curr, exc, word):
+    with pytest.raises(exc, match=word):
+        block_flow(prev, curr)
+
+
+def test_bad_options():
+    a, b = moved(1, 1)
+    with pytest.raises(ValueError, match="mode"):
+        block_flow(a, b, mode="sobel")
+    with pytest.raises(ValueError, match="step"):
+        block_flow(a, b, block=40, step=30)
+    with pytest.raises(ValueError, match="block"):
+        block_flow(a, b, block=500)

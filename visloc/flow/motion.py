@@ -1,0 +1,190 @@
+"""Global motion from a flow field: the report's centre of instantaneous rotation (Appendix H)
+and a robust similarity fit.
+
+Both describe the image content's motion between two frames as a rotation by ``gamma`` about a
+centre plus nothing else (Appendix H) or, equivalently, a rotation about the image centre plus
+a translation (the similarity fit, which also has a scale).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from visloc.types import FlowField, GlobalMotion
+
+__all__ = ["METHODS", "global_motion", "instantaneous_rotation", "similarity_fit"]
+
+#: Solvers :func:`global_motion` offers.
+METHODS = ("similarity", "cir")
+
+_MIN_ROTATION = 1e-6  # rad: below this the centre of rotation is taken to be at infinity
+_FAR = 20.0  # a centre farther than this many image diagonals is taken to be at infinity
+
+
+def _image_center(field: FlowField) -> NDArray[np.float64]:
+    w, h = field.image_size
+    return np.array([(w - 1) / 2.0, (h - 1) / 2.0])
+
+
+def _weighted_similarity(p: NDArray, q: NDArray, wt: NDArray) -> NDArray:
+    """Weighted least squares of ``q = [[a, -b], [b, a]] p + t``; returns (a, b, tx, ty)."""
+    sw = wt.sum()
+    mp = (wt[:, None] * p).sum(axis=0) / sw
+    mq = (wt[:, None] * q).sum(axis=0) / sw
+    pc, qc = p - mp, q - mq
+    den = (wt * (pc * pc).sum(axis=1)).sum()
+    if den <= 1e-12:  # all points at one place: translation only
+        return np.array([1.0, 0.0, *(mq - mp)])
+    a = (wt * (pc * qc).sum(axis=1)).sum() / den
+    b = (wt * (pc[:, 0] * qc[:, 1] - pc[:, 1] * qc[:, 0])).sum() / den
+    t = mq - np.array([a * mp[0] - b * mp[1], b * mp[0] + a * mp[1]])
+    return np.array([a, b, t[0], t[1]])
+
+
+def similarity_fit(field: FlowField, *, min_confidence: float = 0.2, iterations: int = 3) -> GlobalMotion:
+    """Robust weighted least-squares similarity (rotation, scale, translation) of a flow field.
+
+    Blocks are weighted by their confidence; after each fit, blocks whose residual exceeds
+    3 times the robust spread (1.4826 x the median absolute residual, at least 0.1 px) are
+    dropped.
+    """
+    c0 = _image_center(field)
+    use = field.confidence >= min_confidence
+    if use.sum() < 3:
+        return _no_motion(field, "similarity")
+    p = field.centers - c0
+    q = p + field.vectors
+    wt = field.confidence
+    keep = use.copy()
+    params = np.array([1.0, 0.0, 0.0, 0.0])
+    for _ in range(iterations):
+        params = _weighted_similarity(p[keep], q[keep], wt[keep])
+        res = np.hypot(*(_apply(params, p) - q).T)
+        spread = max(1.4826 * float(np.median(res[keep])), 0.1)
+        new = use & (res <= 3.0 * spread)
+        if new.sum() < 3 or np.array_equal(new, keep):
+            break
+        keep = new
+    a, b, tx, ty = params
+    res = np.hypot(*(_apply(params, p[keep]) - q[keep]).T)
+    rotation = float(np.arctan2(b, a))
+    centre = _rotation_centre(a, b, tx, ty, c0)
+    return GlobalMotion(np.array([tx, ty]), rotation, float(np.hypot(a, b)), centre,
+                        float(np.sqrt(np.mean(res * res))), int(keep.sum()), "similarity")
+
+
+def _apply(params: NDArray, p: NDArray) -> NDArray:
+    a, b, tx, ty = params
+    return np.stack([a * p[:, 0] - b * p[:, 1] + tx, b * p[:, 0] + a * p[:, 1] + ty], axis=1)
+
+
+def _rotation_centre(a: float, b: float, tx: float, ty: float, c0: NDArray) -> NDArray | None:
+    """Fixed point of the motion (in image coordinates), or None for a (near) pure
+    translation, whose centre is at infinity."""
+    m = np.array([[a - 1.0, -b], [b, a - 1.0]])
+    if abs(np.arctan2(b, a)) < _MIN_ROTATION or abs(np.linalg.det(m)) < 1e-12:
+        return None
+    c = np.linalg.solve(m, -np.array([tx, ty]))
+    return None if np.hypot(*c) > _FAR * 2.0 * np.hypot(*c0) else c + c0
+
+
+def instantaneous_rotation(field: FlowField, *, min_confidence: float = 0.2) -> GlobalMotion:
+    """The report's solver (Appendix H): centre of instantaneous rotation and angle.
+
+    For each row i of blocks, the x positions of its blocks and the y components of their
+    flow lie on a line with its own slope ``a_i`` and a common zero crossing ``c_x``:
+    ``x_ij = c_x + a_i dy_ij``, solved for all rows at once by least squares (eqs. H.1-H.2);
+    ``c_y`` likewise from the columns with x and y swapped. That holds for small angles; a
+    second pass removes the finite angle's ``(cos g - 1)`` term from the flow and solves again. The angle is the mean of every
+    vector's rotation about that centre (H.3-H.6, with the perpendicular taken so that a
+    rotation turning +x toward +y is positive). The translation at the image centre follows
+    from rotating the centre about ``c`` (H.7, exactly rather than with ``tan``).
+
+    When the flow has no rotation the two systems are singular (all lines parallel, the
+    centre at infinity), or the rotation found explains the flow no better than a
+    translation: then the result is the confidence-weighted mean translation, with
+    ``center_of_rotation=None``.
+    """
+    c0 = _image_center(field)
+    use = field.confidence >= min_confidence
+    if use.sum() < 3:
+        return _no_motion(field, "cir")
+    pts, vec, wt = field.centers[use], field.vectors[use], field.confidence[use]
+    mean_t = (wt[:, None] * vec).sum(axis=0) / wt.sum()
+    gamma, c = 0.0, None
+    for _ in range(2):  # the second pass corrects the first's small-angle approximation
+        # exact rotation: dy = sin g (x - cx) + (cos g - 1)(y - cy); dx = -sin g (y - cy) + (cos g - 1)(x - cx)
+        k = np.cos(gamma) - 1.0
+        fix_y = k * (pts[:, 1] - c[1]) if c is not None else 0.0
+        fix_x = k * (pts[:, 0] - c[0]) if c is not None else 0.0
+        cx = _common_zero_crossing(pts[:, 0], pts[:, 1], vec[:, 1] - fix_y, wt)  # rows: x vs dy
+        cy = _common_zero_crossing(pts[:, 1], pts[:, 0], -(vec[:, 0] - fix_x), wt)  # columns: y vs -dx
+        if cx is None or cy is None:
+            return GlobalMotion(mean_t, 0.0, 1.0, None, _rms(vec - mean_t), int(use.sum()), "cir")
+        c = np.array([cx, cy])
+        r = pts - c
+        cross = r[:, 0] * vec[:, 1] - r[:, 1] * vec[:, 0]  # report eq. (H.5), perpendicular fixed
+        gamma_i = np.arctan2(cross, (r * r).sum(axis=1) + (r * vec).sum(axis=1))
+        gamma = float((wt * gamma_i).sum() / wt.sum())  # report eq. (H.6), confidence-weighted
+    cg, sg = np.cos(gamma), np.sin(gamma)
+    rc = c0 - c
+    t = np.array([cg * rc[0] - sg * rc[1], sg * rc[0] + cg * rc[1]]) - rc  # report eq. (H.7)
+    model = np.stack([cg * r[:, 0] - sg * r[:, 1], sg * r[:, 0] + cg * r[:, 1]], axis=1) - r
+    rms_rot, rms_trans = _rms(vec - model), _rms(vec - mean_t)
+    if rms_rot >= rms_trans:  # the rotation explains nothing: a translation, centre at infinity
+        return GlobalMotion(mean_t, 0.0, 1.0, None, rms_trans, int(use.sum()), "cir")
+    return GlobalMotion(t, gamma, 1.0, c, rms_rot, int(use.sum()), "cir")
+
+
+def _common_zero_crossing(pos: NDArray, group: NDArray, comp: NDArray, wt: NDArray) -> float | None:
+    """Least squares of ``pos_ij = c + a_i comp_ij`` over groups i (report eqs. H.1-H.2);
+    returns c, or None when the system is (nearly) singular."""
+    keys, idx = np.unique(np.round(group, 3), return_inverse=True)
+    n = len(keys)
+    A = np.zeros((len(pos), n + 1))
+    A[:, 0] = 1.0
+    A[np.arange(len(pos)), 1 + idx] = comp
+    sw = np.sqrt(wt)
+    sol, _, rank, sv = np.linalg.lstsq(A * sw[:, None], pos * sw, rcond=None)
+    if rank < n + 1 or sv[-1] < 1e-6 * sv[0]:
+        return None
+    spread = np.abs(comp).max() if len(comp) else 0.0
+    if spread < 1e-3:  # no rotation signal in this component
+        return None
+    return float(sol[0])
+
+
+def _rms(r: NDArray) -> float:
+    return float(np.sqrt(np.mean((r * r).sum(axis=1)))) if len(r) else 0.0
+
+
+def _no_motion(field: FlowField, method: str) -> GlobalMotion:
+    return GlobalMotion(np.zeros(2), 0.0, 1.0, None, float("nan"), 0, method)
+
+
+def global_motion(field: FlowField, *, method: str = "similarity", min_confidence: float = 0.2) -> GlobalMotion:
+    """The image content's global motion from a :class:`FlowField`.
+
+    Parameters
+    ----------
+    field : FlowField
+    method : {"similarity", "cir"}
+        ``"similarity"``: robust weighted least-squares rotation + scale + translation
+        (default; see ``bench/flow.py``). ``"cir"``: the report's centre of instantaneous
+        rotation (Appendix H).
+    min_confidence : float
+        Blocks below this confidence are not used.
+
+    Returns
+    -------
+    GlobalMotion
+        ``inliers == 0`` when fewer than three blocks were usable (then no motion).
+    """
+    if not isinstance(field, FlowField):
+        raise TypeError(f"field must be a FlowField, got {type(field).__name__}")
+    if method == "similarity":
+        return similarity_fit(field, min_confidence=min_confidence)
+    if method == "cir":
+        return instantaneous_rotation(field, min_confidence=min_confidence)
+    raise ValueError(f"method must be one of {METHODS}, got {method!r}")

@@ -1,0 +1,221 @@
+"""Metric ground velocity of a downward camera from the image motion (report §3.2.2, eq. H.7).
+
+Conventions
+-----------
+``v`` is the camera's velocity relative to the ground in m/s, a (2,) array in the camera axes
+of the *first* frame of the pair: x right and y down as in the image. A camera moving toward
++x makes the image content move toward -x. ``yaw_rate`` is the camera's rotation rate in
+rad/s about its +z axis (the optical axis, pointing at the ground), right-handed: positive
+turns camera +x toward camera +y; the content then turns the other way.
+
+Pinhole model over flat ground at distance ``height`` along the optical axis: a ground
+displacement ``D`` (m) moves the content at the principal point by ``-f D / height`` px
+(report eq. H.7). Roll and pitch rotations also move the content (by ``f`` times the angle,
+whatever the height); with gyro rates they are subtracted first, as PX4 subtracts body rates
+from flow rates.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from visloc.flow.block import block_flow, check_pair
+from visloc.flow.motion import global_motion
+from visloc.pose.camera import Camera
+from visloc.types import FlowField, GlobalMotion, GroundVelocity
+
+__all__ = ["EgoMotion", "estimate_ground_velocity", "ground_velocity"]
+
+
+def _positive(value: float, name: str) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be a number, got {type(value).__name__}") from None
+    if not (0.0 < v < float("inf")):
+        raise ValueError(f"{name} must be positive and finite, got {value!r}")
+    return v
+
+
+def ground_velocity(
+    motion: GlobalMotion,
+    camera: Camera,
+    height: float,
+    dt: float,
+    *,
+    gyro: NDArray | None = None,
+    field: FlowField | None = None,
+) -> GroundVelocity:
+    """Camera velocity over flat ground from the image motion between two frames.
+
+    Parameters
+    ----------
+    motion : GlobalMotion
+        Content motion from the first frame to the second.
+    camera : Camera
+        Intrinsics of the frames (distortion is ignored near the principal point).
+    height : float
+        Distance from the camera to the ground along the optical axis, m (> 0).
+    dt : float
+        Time between the frames, s (> 0).
+    gyro : array_like (3,), optional
+        Body rates (wx, wy, wz) in rad/s about the camera axes during the interval; wx and wy
+        are removed from the flow (wz is measured by the flow itself).
+    field : FlowField, optional
+        The flow the motion came from, for the quality figure.
+
+    Returns
+    -------
+    GroundVelocity
+        ``quality`` 0 (and zero velocity) with a reason when the motion had no support.
+    """
+    if not isinstance(motion, GlobalMotion):
+        raise TypeError(f"motion must be a GlobalMotion, got {type(motion).__name__}")
+    if not isinstance(camera, Camera):
+        raise TypeError(f"camera must be a Camera, got {type(camera).__name__}")
+    h = _positive(height, "height")
+    dt = _positive(dt, "dt")
+    if motion.inliers < 3 or not np.isfinite(motion.translation).all():
+        return GroundVelocity(np.zeros(2), 0.0, 0.0, "too few textured blocks to measure motion", motion)
+    w, hgt = camera.size if camera.size is not None else (None, None)
+    if field is not None:
+        w, hgt = field.image_size
+    if w is None:
+        raise ValueError("camera.size is unknown: pass the FlowField (field=...) or a camera with a size")
+    center = np.array([(w - 1) / 2.0, (hgt - 1) / 2.0])
+    pp = np.array([camera.cx, camera.cy])
+    d = motion.displacement_at(pp, center)  # content displacement at the principal point, px
+    if gyro is not None:
+        g = np.asarray(gyro, np.float64).reshape(-1)
+        if g.shape != (3,) or not np.isfinite(g).all():
+            raise ValueError(f"gyro must be three finite rates (wx, wy, wz) in rad/s, got {gyro!r}")
+        # a rotation by (ax, ay) about camera x, y moves the content at the principal point by
+        # (-f ay, +f ax); remove it (PX4: compensated flow = flow rate - body rate)
+        d = d - np.array([-camera.fx * g[1] * dt, camera.fy * g[0] * dt])
+    yaw = -motion.rotation  # the camera turns opposite to its image content
+    # ground displacement in the second frame's axes, then turned back into the first frame's
+    D2 = -np.array([d[0] / camera.fx, d[1] / camera.fy]) * h  # report eq. (H.7)
+    c, s = np.cos(yaw), np.sin(yaw)
+    D1 = np.array([c * D2[0] - s * D2[1], s * D2[0] + c * D2[1]])
+    quality, reason = _quality(motion, field)
+    return GroundVelocity(D1 / dt, yaw / dt, quality, reason, motion)
+
+
+def _quality(motion: GlobalMotion, field: FlowField | None) -> tuple[float, str]:
+    """In [0, 1]: the share of confident blocks used, reduced by a large fit residual."""
+    if field is None or len(field.confidence) == 0:
+        support = 1.0
+    else:
+        support = min(1.0, motion.inliers / max(0.5 * len(field.confidence), 1.0))
+        support *= float(np.clip(np.mean(field.confidence) / 0.5, 0.0, 1.0))
+    fit = 1.0 / (1.0 + (motion.residual_rms / 0.5) ** 2) if np.isfinite(motion.residual_rms) else 0.0
+    q = float(np.clip(support * fit, 0.0, 1.0))
+    reason = "" if q >= 0.3 else ("little texture or few confident blocks" if support < 0.5 else "flow disagrees with a rigid motion")
+    return q, reason
+
+
+def estimate_ground_velocity(
+    prev: NDArray[np.uint8],
+    curr: NDArray[np.uint8],
+    camera: Camera,
+    height: float,
+    dt: float,
+    *,
+    gyro: NDArray | None = None,
+    method: str = "similarity",
+    **flow_options: object,
+) -> GroundVelocity:
+    """Camera ground velocity from two consecutive downward frames: :func:`block_flow`, then
+    :func:`global_motion`, then :func:`ground_velocity` (conventions in the module docstring).
+
+    A texture-less pair gives ``quality`` 0 with a reason, never NaN.
+    """
+    _positive(height, "height")
+    _positive(dt, "dt")
+    a, b = check_pair(prev, curr)
+    fld = block_flow(a, b, **flow_options)  # type: ignore[arg-type]
+    motion = global_motion(fld, method=method)
+    return ground_velocity(motion, camera, height, dt, gyro=gyro, field=fld)
+
+
+@dataclass
+class EgoMotion:
+    """Streaming ground velocity and dead-reckoned track (report Figure 3.8, drift included).
+
+    Call :meth:`update` with every new frame; the first frame only primes the stream. The
+    track is in the first frame's camera axes (x right, y down in that image), in metres,
+    with the accumulated yaw.
+
+    Parameters
+    ----------
+    camera : Camera
+    height : float, optional
+        Default height (m) when :meth:`update` gets none.
+    fps : float, optional
+        Default frame rate when :meth:`update` gets no ``dt`` or times.
+    options : dict
+        Passed to :func:`block_flow` (and ``method`` to :func:`global_motion`).
+    """
+
+    camera: Camera
+    height: float | None = None
+    fps: float | None = None
+    options: dict = field(default_factory=dict)
+    track: list[tuple[float, float, float, float]] = field(default_factory=list, init=False)
+    _prev: NDArray[np.uint8] | None = field(default=None, init=False, repr=False)
+    _time: float = field(default=0.0, init=False, repr=False)
+    _pos: NDArray = field(default_factory=lambda: np.zeros(2), init=False, repr=False)
+    _yaw: float = field(default=0.0, init=False, repr=False)
+
+    def update(
+        self,
+        image: NDArray[np.uint8],
+        *,
+        dt: float | None = None,
+        height: float | None = None,
+        gyro: NDArray | None = None,
+    ) -> GroundVelocity | None:
+        """Add a frame; returns the velocity since the previous frame (None for the first).
+
+        Raises ValueError for a frame of another size than the previous one, a missing or
+        non-positive ``dt`` (when no ``fps`` was set) or height.
+        """
+        from visloc.images import as_gray
+
+        img = as_gray(image, "image")
+        if self._prev is None:
+            self._prev = img
+            self.track.append((0.0, 0.0, 0.0, 0.0))
+            return None
+        if dt is None:
+            if self.fps is None:
+                raise ValueError("dt is required when EgoMotion has no fps")
+            dt = 1.0 / self.fps
+        h = height if height is not None else self.height
+        if h is None:
+            raise ValueError("height is required when EgoMotion has no default height")
+        opts = dict(self.options)
+        method = opts.pop("method", "similarity")
+        gv = estimate_ground_velocity(self._prev, img, self.camera, h, dt, gyro=gyro, method=method, **opts)
+        # integrate: the displacement is in the previous frame's axes
+        c, s = np.cos(self._yaw), np.sin(self._yaw)
+        step = gv.v * dt
+        self._pos = self._pos + np.array([c * step[0] - s * step[1], s * step[0] + c * step[1]])
+        self._yaw += gv.yaw_rate * dt
+        self._time += dt
+        self.track.append((self._time, float(self._pos[0]), float(self._pos[1]), self._yaw))
+        self._prev = img
+        return gv
+
+    @property
+    def position(self) -> NDArray[np.float64]:
+        """Integrated (x, y) position, m, in the first frame's camera axes."""
+        return self._pos.copy()
+
+    @property
+    def yaw(self) -> float:
+        """Integrated yaw, rad."""
+        return self._yaw

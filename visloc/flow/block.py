@@ -11,7 +11,9 @@ does). Each profile of the first frame is matched against the second frame's by 
 squared differences over a search range; a parabola through the cost minimum gives the
 sub-pixel shift. First the whole image's profiles are matched over a wide range, and the
 second frame's bands are taken that much further along, so each block searches only a small
-range around the global shift: fast motion stays in reach at little cost. Band sums come
+range around the global shift: fast motion stays in reach at little cost. (The global match
+uses the central third of the image only: far from the centre a yaw rotation moves the
+content across the bands and smears the long profiles.) Band sums come
 from ``cv2.resize(INTER_AREA)``; all blocks and both directions are matched in one batch.
 """
 
@@ -211,10 +213,13 @@ def block_flow(
     k = bsz // stp
     grad = mode == "gradient"
     gxa, gya = _groups(a, stp, rows, cols)
-    # whole-image shift: the sums over all rows (columns) of both frames
-    ga = (gxa.mean(axis=0), gya.mean(axis=0))
-    gb = (cv2.reduce(b_img[:rows, :cols], 0, cv2.REDUCE_AVG, dtype=cv2.CV_32F)[0],
-          cv2.reduce(b_img[:rows, :cols], 1, cv2.REDUCE_AVG, dtype=cv2.CV_32F)[:, 0])
+    # global shift from the central third of the rows (columns): a yaw rotation smears the
+    # profile of a band by its length times the angle, so the band is kept short
+    ny, nx = len(gxa), len(gya)
+    r0, r1, c0, c1 = ny // 3, ny - ny // 3, nx // 3, nx - nx // 3
+    ga = (gxa[r0:r1].mean(axis=0), gya[c0:c1].mean(axis=0))
+    gb = (cv2.reduce(b_img[r0 * stp : r1 * stp, :cols], 0, cv2.REDUCE_AVG, dtype=cv2.CV_32F)[0],
+          cv2.reduce(b_img[:rows, c0 * stp : c1 * stp], 1, cv2.REDUCE_AVG, dtype=cv2.CV_32F)[:, 0])
     if grad:
         ga, gb = (np.diff(ga[0]), np.diff(ga[1])), (np.diff(gb[0]), np.diff(gb[1]))
     sx = _global_shift(ga[0], gb[0], gsrch)

@@ -94,6 +94,28 @@ def build_parser() -> argparse.ArgumentParser:
     rm.add_argument("--dict", default="DICT_4X4_50", metavar="NAME|FILE", help="dictionary")
     rm.add_argument("--difficulty", default="easy", choices=["easy", "hard", "small", "empty"])
     rm.add_argument("--video", action="store_true", help="write markers.mp4 of a moving camera instead")
+    rf = rs.add_parser("flow", help="a downward camera's flight over ground + ground_truth.csv")
+    rf.add_argument("outdir", help="output folder")
+    rf.add_argument("--seconds", type=_positive, default=10.0, help="duration (default 10 s)")
+    rf.add_argument("--fps", type=_positive, default=60.0, help="frame rate (default 60)")
+    rf.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
+    rf.add_argument("--size", type=_size, default=(320, 240), help="WIDTHxHEIGHT (default 320x240)")
+    rf.add_argument("--texture", default="grass", choices=["grass", "gravel", "brick", "noise"])
+    rf.add_argument("--video", action="store_true", help="write flight.mp4 instead of PNG frames")
+
+    fl = sub.add_parser("flow", help="ground velocity of a downward camera from its frames (block flow)")
+    fl.add_argument("source", help="folder, glob pattern, video file or camera index")
+    fl.add_argument("--camera", required=True, metavar="FILE", help="camera file (OpenCV YAML)")
+    hg = fl.add_mutually_exclusive_group(required=True)
+    hg.add_argument("--height", type=_positive, metavar="H", help="height above the ground, m")
+    hg.add_argument("--height-csv", metavar="FILE", help="CSV with columns frame,height (e.g. heights.csv)")
+    fl.add_argument("--fps", type=_positive, help="frame rate (required for image folders)")
+    fl.add_argument("--method", default="similarity", choices=["similarity", "cir"],
+                    help="global-motion solver (default: similarity; cir = report Appendix H)")
+    fl.add_argument("--out", metavar="FILE.csv", help="write one row per frame")
+    fl.add_argument("--rerun", metavar="FILE.rrd", help="write a rerun recording")
+    fl.add_argument("--max-frames", type=_count, metavar="N", help="stop after N frames")
+    fl.add_argument("--quiet", action="store_true", help="no progress bar or summary")
 
     m = sub.add_parser("demo", help="render a few frames, detect markers and poses, print a table")
     m.add_argument("--out", default="visloc-demo", metavar="DIR", help="output folder (default ./visloc-demo)")
@@ -113,7 +135,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.parse_args(["render", "--help"])
     from visloc import commands  # imported late: `visloc --help` stays fast
 
-    run = {"detect": commands.detect, "render": commands.render, "demo": commands.demo}[args.command]
+    run = {"detect": commands.detect, "render": commands.render, "demo": commands.demo,
+           "flow": commands.flow}[args.command]
     try:
         return run(args)
     except KeyboardInterrupt:

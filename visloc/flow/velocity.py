@@ -147,7 +147,7 @@ class EgoMotion:
 
     Call :meth:`update` with every new frame; the first frame only primes the stream. The
     track is in the first frame's camera axes (x right, y down in that image), in metres,
-    with the accumulated yaw.
+    with the accumulated yaw; ``last_field`` is the last block flow.
 
     Parameters
     ----------
@@ -165,6 +165,7 @@ class EgoMotion:
     fps: float | None = None
     options: dict = field(default_factory=dict)
     track: list[tuple[float, float, float, float]] = field(default_factory=list, init=False)
+    last_field: FlowField | None = field(default=None, init=False)
     _prev: NDArray[np.uint8] | None = field(default=None, init=False, repr=False)
     _time: float = field(default=0.0, init=False, repr=False)
     _pos: NDArray = field(default_factory=lambda: np.zeros(2), init=False, repr=False)
@@ -197,9 +198,14 @@ class EgoMotion:
         h = height if height is not None else self.height
         if h is None:
             raise ValueError("height is required when EgoMotion has no default height")
+        _positive(h, "height")
+        _positive(dt, "dt")
+        a, b = check_pair(self._prev, img)
         opts = dict(self.options)
         method = opts.pop("method", "similarity")
-        gv = estimate_ground_velocity(self._prev, img, self.camera, h, dt, gyro=gyro, method=method, **opts)
+        self.last_field = block_flow(a, b, **opts)
+        gv = ground_velocity(global_motion(self.last_field, method=method), self.camera, h, dt, gyro=gyro,
+                             field=self.last_field)
         # integrate: the displacement is in the previous frame's axes
         c, s = np.cos(self._yaw), np.sin(self._yaw)
         step = gv.v * dt
@@ -209,6 +215,11 @@ class EgoMotion:
         self.track.append((self._time, float(self._pos[0]), float(self._pos[1]), self._yaw))
         self._prev = img
         return gv
+
+    @property
+    def frame_shape(self) -> tuple[int, ...] | None:
+        """(H, W) of the frames in the stream, None before the first."""
+        return None if self._prev is None else self._prev.shape
 
     @property
     def position(self) -> NDArray[np.float64]:

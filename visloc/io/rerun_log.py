@@ -109,6 +109,7 @@ class RerunLogger(Closing):
         self.recording.log("/", rr.ViewCoordinates.RDF, static=True)
         self._pinhole: tuple[bytes, tuple[int, int]] | None = None
         self._marker_paths: set[str] = set()
+        self._track: list[list[float]] = []
         self._closed = False
 
     @property
@@ -209,6 +210,42 @@ class RerunLogger(Closing):
             rr.Points2D([c[0] + _HALF_PIXEL for c in corners], colors=_CORNER0_RGB, radii=-3.0),
         )
         self._log_poses(ids, poses, marker_length)
+
+    def log_flow(
+        self,
+        index: int,
+        time: float,
+        image: NDArray[np.uint8] | None,
+        field: Any | None,
+        velocity: Any | None,
+        position: Sequence[float] | None = None,
+    ) -> None:
+        """Log one frame of a ground-velocity run: the image, the block flow vectors
+        (``camera/image/flow``), the velocity, yaw rate and quality as scalar plots
+        (``plots/vx``, ``plots/vy``, ``plots/yaw_rate``, ``plots/quality``) and the integrated
+        position (``track/position``, a growing line in metres).
+
+        ``field`` is a :class:`visloc.types.FlowField` (or None), ``velocity`` a
+        :class:`visloc.types.GroundVelocity` (or None for the first frame).
+        """
+        rec = self.recording
+        rec.set_time("frame", sequence=int(index))
+        rec.set_time("time", duration=float(time))
+        if image is not None:
+            img = rr.Image(_rgb(image))
+            rec.log("camera/image", img if self.jpeg_quality is None else img.compress(jpeg_quality=int(self.jpeg_quality)))
+        if field is not None and len(field.centers):
+            good = np.asarray(field.confidence) > 0.2
+            rec.log("camera/image/flow", rr.Arrows2D(origins=field.centers[good] + _HALF_PIXEL,
+                                                     vectors=field.vectors[good], colors=(0, 200, 255)))
+        if velocity is not None:
+            rec.log("plots/vx", rr.Scalars(float(velocity.v[0])))
+            rec.log("plots/vy", rr.Scalars(float(velocity.v[1])))
+            rec.log("plots/yaw_rate", rr.Scalars(float(velocity.yaw_rate)))
+            rec.log("plots/quality", rr.Scalars(float(velocity.quality)))
+        if position is not None:
+            self._track.append([float(position[0]), float(position[1])])
+            rec.log("track/position", rr.LineStrips2D([self._track]))
 
     @staticmethod
     def _corners(det: MarkerDetection, i: int) -> NDArray[np.float64]:

@@ -1,0 +1,87 @@
+"""``visloc render flow`` and ``visloc flow`` through ``main([...])``."""
+
+import csv
+
+import numpy as np
+import pytest
+
+from visloc.cli import main
+
+
+@pytest.fixture(scope="module")
+def flight(tmp_path_factory):
+    out = tmp_path_factory.mktemp("flight")
+    assert main(["render", "flow", str(out), "--seconds", "0.25", "--fps", "60", "--seed", "4"]) == 0
+    return out
+
+
+def _rows(path):
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def _truth(folder):
+    return np.genfromtxt(folder / "ground_truth.csv", delimiter=",", names=True)
+
+
+def test_flow_on_frames_matches_the_ground_truth(flight, tmp_path, capsys):
+    out = tmp_path / "v.csv"
+    code = main(["flow", str(flight), "--camera", str(flight / "camera.yml"), "--height-csv",
+                 str(flight / "heights.csv"), "--fps", "60", "--out", str(out), "--rerun", str(tmp_path / "f.rrd")])
+    assert code == 0
+    rows = _rows(out)
+    gt = _truth(flight)
+    assert len(rows) == len(gt) and rows[0]["reason"] == "first frame"
+    v = np.array([[float(r["vx"]), float(r["vy"])] for r in rows[1:]])
+    true = np.stack([gt["pair_vx"][1:], gt["pair_vy"][1:]], axis=1)
+    rel = np.linalg.norm(v - true, axis=1) / np.linalg.norm(true, axis=1)
+    assert np.median(rel) < 0.03
+    yaw = np.array([float(r["yaw_rate"]) for r in rows[1:]])
+    assert np.median(np.abs(yaw - gt["pair_yaw_rate"][1:])) < 0.05
+    assert (tmp_path / "f.rrd").stat().st_size > 0
+    assert "median quality" in capsys.readouterr().err
+
+
+def test_flow_on_a_video(tmp_path):
+    assert main(["render", "flow", str(tmp_path), "--seconds", "0.2", "--video", "--seed", "5"]) == 0
+    out = tmp_path / "v.csv"
+    assert main(["flow", str(tmp_path / "flight.mp4"), "--camera", str(tmp_path / "camera.yml"),
+                 "--height-csv", str(tmp_path / "heights.csv"), "--out", str(out), "--quiet"]) == 0
+    rows = _rows(out)
+    assert len(rows) == len(_truth(tmp_path)) > 5
+    assert all(float(r["quality"]) > 0.3 for r in rows[1:])
+
+
+def test_unreadable_frame_is_recorded_and_skipped(flight, tmp_path, capsys):
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    for p in sorted(flight.glob("frame_*.png"))[:4]:
+        (folder / p.name).write_bytes(p.read_bytes())
+    (folder / "frame_00001b.png").write_bytes(b"\x89PNG broken")
+    out = tmp_path / "v.csv"
+    assert main(["flow", str(folder), "--camera", str(flight / "camera.yml"), "--height", "1.5",
+                 "--fps", "60", "--out", str(out), "--quiet"]) == 1
+    rows = _rows(out)
+    assert len(rows) == 5 and rows[2]["reason"].startswith("unreadable")
+    assert capsys.readouterr().err.count("warning") == 1
+
+
+@pytest.mark.parametrize(
+    "extra, word",
+    [
+        (["--height", "1.0"], "--fps"),  # image folders need a frame rate
+        (["--height", "-2", "--fps", "60"], "height"),
+        (["--height-csv", "{bad_csv}", "--fps", "60"], "height"),
+        (["--fps", "60"], "height"),  # one of --height / --height-csv is required
+    ],
+)
+def test_flow_configuration_errors(flight, tmp_path, capsys, extra, word):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("frame,alt\n0,1.0\n")
+    argv = ["flow", str(flight), "--camera", str(flight / "camera.yml"), *[e.format(bad_csv=bad) for e in extra]]
+    try:
+        code = main(argv)
+    except SystemExit as exc:
+        code = exc.code
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and word in err

@@ -70,19 +70,28 @@ def _groups(img: NDArray[np.uint8], step: int, rows: int, cols: int, sx: int = 0
     return gx.astype(np.float32), gy.T.astype(np.float32)
 
 
+@lru_cache(maxsize=32)
+def _shift_table(n: int, search: int) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """Shifts d and the overlap [lo, hi) of ``p[k]`` and ``q[k + d]`` for profiles of length n."""
+    d = np.arange(-search, search + 1)
+    lo = np.maximum(0, -d)
+    hi = np.minimum(n, n - d)
+    return d, lo, hi, (hi - lo).astype(np.float64)
+
+
 def _global_shift(p: NDArray, q: NDArray, search: int) -> int:
     """Integer d in [-search, search] minimising the mean squared difference of ``p[k]`` and
     ``q[k + d]`` over their overlap."""
     n = len(p)
     search = min(search, n // 2)
+    d, lo, hi, count = _shift_table(n, search)
     pq = np.correlate(q, p, mode="full")[n - 1 - search : n + search]  # sum_k p[k] q[k + d]
-    cp = np.concatenate([[0.0], np.cumsum(p * p)])
-    cq = np.concatenate([[0.0], np.cumsum(q * q)])
-    d = np.arange(-search, search + 1)
-    lo = np.maximum(0, -d)
-    hi = np.minimum(n, n - d)
-    ssd = (cp[hi] - cp[lo]) + (cq[hi + d] - cq[lo + d]) - 2.0 * pq
-    return int(d[np.argmin(ssd / (hi - lo))])
+    cp = np.zeros(n + 1)
+    np.cumsum(p * p, out=cp[1:])
+    cq = np.zeros(n + 1)
+    np.cumsum(q * q, out=cq[1:])
+    ssd = cp[hi] - cp[lo] + cq[hi + d] - cq[lo + d] - 2.0 * pq
+    return int(d[np.argmin(ssd / count)])
 
 
 def _profile(g: NDArray, k: int, gradient: bool) -> NDArray:
@@ -91,27 +100,23 @@ def _profile(g: NDArray, k: int, gradient: bool) -> NDArray:
     return np.diff(bands, axis=1) if gradient else bands
 
 
-def _subpixel(cost: NDArray) -> tuple[NDArray, NDArray, NDArray]:
-    """Best index per row of ``cost`` (S, D), its parabolic sub-pixel offset in [-0.5, 0.5],
-    and the ratio of the best cost to the best one at least two steps away (0 = clear)."""
+def _best_and_ratio(cost: NDArray) -> tuple[NDArray, NDArray]:
+    """Best index per row of ``cost`` (S, D) and the ratio of the best cost to the best one at
+    least two steps away (0 = an unambiguous minimum; 1 = none, or a minimum at the end of the
+    search range or without curvature)."""
     s, n = cost.shape
     r = np.arange(s)
-    with np.errstate(invalid="ignore", divide="ignore"):  # rows with no valid cost stay flat
-        return _subpixel_rows(cost, r, n)
-
-
-def _subpixel_rows(cost: NDArray, r: NDArray, n: int) -> tuple[NDArray, NDArray, NDArray]:
     i = np.argmin(cost, axis=1)
     im, ip = np.maximum(i - 1, 0), np.minimum(i + 1, n - 1)
-    c0, cm, cp = cost[r, i], cost[r, im], cost[r, ip]
-    den = cm - 2.0 * c0 + cp
-    inner = (i > 0) & (i < n - 1) & (den > 0) & np.isfinite(den)
-    off = np.where(inner, 0.5 * (cm - cp) / np.where(inner, den, 1.0), 0.0)
+    c0 = cost[r, i]
     masked = cost.copy()
     masked[r, im] = masked[r, i] = masked[r, ip] = np.inf
     second = masked.min(axis=1)
-    ratio = np.where(inner & (second > 0) & np.isfinite(second), c0 / np.maximum(second, 1e-12), 1.0)
-    return i, np.clip(off, -0.5, 0.5), ratio
+    with np.errstate(invalid="ignore", divide="ignore"):  # rows with no valid cost
+        den = cost[r, im] + cost[r, ip] - 2.0 * c0
+        curved = (den > 0) & np.isfinite(den)  # a proper minimum inside the valid range
+        ratio = np.where(np.isfinite(second) & (second > 0), c0 / second, 1.0)
+    return i, np.where((i > 0) & (i < n - 1) & curved, ratio, 1.0)
 
 
 class _Layout(NamedTuple):
@@ -249,7 +254,7 @@ def block_flow(
         q_seg = q_seg - q_seg.mean(axis=2, keepdims=True)
     diff = q_seg - p_seg[:, None, :]
     cost = np.where(ok, np.einsum("sdl,sdl->sd", diff, diff), np.inf)
-    best, _, ratio = _subpixel(cost)
+    best, ratio = _best_and_ratio(cost)
     off = _gauss_newton_step(p_seg, q_seg, best)
     disp = (shift + lay.d[best] + off).reshape(2, -1)
     texture = np.einsum("sl,sl->s", p_seg, p_seg).reshape(2, -1).min(axis=0)

@@ -8,6 +8,8 @@ a translation (the similarity fit, which also has a scale).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -27,66 +29,64 @@ def _image_center(field: FlowField) -> NDArray[np.float64]:
     return np.array([(w - 1) / 2.0, (h - 1) / 2.0])
 
 
-def _weighted_similarity(p: NDArray, q: NDArray, wt: NDArray) -> NDArray:
+def _weighted_similarity(p: NDArray, q: NDArray, wt: NDArray) -> tuple[float, float, float, float]:
     """Weighted least squares of ``q = [[a, -b], [b, a]] p + t``; returns (a, b, tx, ty)."""
     sw = wt.sum()
-    mp = (wt[:, None] * p).sum(axis=0) / sw
-    mq = (wt[:, None] * q).sum(axis=0) / sw
+    mp = wt @ p / sw
+    mq = wt @ q / sw
     pc, qc = p - mp, q - mq
-    den = (wt * (pc * pc).sum(axis=1)).sum()
+    den = float(wt @ (pc * pc).sum(axis=1))
     if den <= 1e-12:  # all points at one place: translation only
-        return np.array([1.0, 0.0, *(mq - mp)])
-    a = (wt * (pc * qc).sum(axis=1)).sum() / den
-    b = (wt * (pc[:, 0] * qc[:, 1] - pc[:, 1] * qc[:, 0])).sum() / den
-    t = mq - np.array([a * mp[0] - b * mp[1], b * mp[0] + a * mp[1]])
-    return np.array([a, b, t[0], t[1]])
+        return 1.0, 0.0, float(mq[0] - mp[0]), float(mq[1] - mp[1])
+    a = float(wt @ (pc * qc).sum(axis=1)) / den
+    b = float(wt @ (pc[:, 0] * qc[:, 1] - pc[:, 1] * qc[:, 0])) / den
+    return a, b, float(mq[0] - (a * mp[0] - b * mp[1])), float(mq[1] - (b * mp[0] + a * mp[1]))
 
 
 def similarity_fit(field: FlowField, *, min_confidence: float = 0.2, iterations: int = 3) -> GlobalMotion:
     """Robust weighted least-squares similarity (rotation, scale, translation) of a flow field.
 
     Blocks are weighted by their confidence; after each fit, blocks whose residual exceeds
-    3 times the robust spread (1.4826 x the median absolute residual, at least 0.1 px) are
-    dropped.
+    3 times the robust spread (1.4826 x the median residual, at least 0.1 px) are dropped,
+    until the set of blocks no longer changes.
     """
     c0 = _image_center(field)
     use = field.confidence >= min_confidence
-    if use.sum() < 3:
+    if int(use.sum()) < 3:
         return _no_motion(field, "similarity")
     p = field.centers - c0
     q = p + field.vectors
     wt = field.confidence
-    keep = use.copy()
-    params = np.array([1.0, 0.0, 0.0, 0.0])
+    keep = use
     for _ in range(iterations):
-        params = _weighted_similarity(p[keep], q[keep], wt[keep])
-        res = np.hypot(*(_apply(params, p) - q).T)
-        spread = max(1.4826 * float(np.median(res[keep])), 0.1)
-        new = use & (res <= 3.0 * spread)
-        if new.sum() < 3 or np.array_equal(new, keep):
+        a, b, tx, ty = _weighted_similarity(p[keep], q[keep], wt[keep])
+        dx = a * p[:, 0] - b * p[:, 1] + tx - q[:, 0]
+        dy = b * p[:, 0] + a * p[:, 1] + ty - q[:, 1]
+        r2 = dx * dx + dy * dy
+        kept = r2[keep]
+        med2 = float(np.partition(kept, len(kept) // 2)[len(kept) // 2])  # median of squares
+        limit = 9.0 * max(1.4826**2 * med2, 0.01)  # (3 x spread)^2
+        new = use & (r2 <= limit)
+        if new.sum() < 3 or (new == keep).all():
             break
         keep = new
-    a, b, tx, ty = params
-    res = np.hypot(*(_apply(params, p[keep]) - q[keep]).T)
-    rotation = float(np.arctan2(b, a))
-    centre = _rotation_centre(a, b, tx, ty, c0)
-    return GlobalMotion(np.array([tx, ty]), rotation, float(np.hypot(a, b)), centre,
-                        float(np.sqrt(np.mean(res * res))), int(keep.sum()), "similarity")
-
-
-def _apply(params: NDArray, p: NDArray) -> NDArray:
-    a, b, tx, ty = params
-    return np.stack([a * p[:, 0] - b * p[:, 1] + tx, b * p[:, 0] + a * p[:, 1] + ty], axis=1)
+    rms = float(np.sqrt(r2[keep].mean()))
+    return GlobalMotion(np.array([tx, ty]), math.atan2(b, a), math.hypot(a, b), _rotation_centre(a, b, tx, ty, c0),
+                        rms, int(keep.sum()), "similarity")
 
 
 def _rotation_centre(a: float, b: float, tx: float, ty: float, c0: NDArray) -> NDArray | None:
     """Fixed point of the motion (in image coordinates), or None for a (near) pure
     translation, whose centre is at infinity."""
-    m = np.array([[a - 1.0, -b], [b, a - 1.0]])
-    if abs(np.arctan2(b, a)) < _MIN_ROTATION or abs(np.linalg.det(m)) < 1e-12:
+    am1 = a - 1.0  # solve [[a - 1, -b], [b, a - 1]] c = -t in closed form
+    det = am1 * am1 + b * b
+    if abs(math.atan2(b, a)) < _MIN_ROTATION or det < 1e-12:
         return None
-    c = np.linalg.solve(m, -np.array([tx, ty]))
-    return None if np.hypot(*c) > _FAR * 2.0 * np.hypot(*c0) else c + c0
+    cx = (-am1 * tx - b * ty) / det
+    cy = (b * tx - am1 * ty) / det
+    if math.hypot(cx, cy) > _FAR * 2.0 * math.hypot(c0[0], c0[1]):
+        return None
+    return np.array([cx + c0[0], cy + c0[1]])
 
 
 def instantaneous_rotation(field: FlowField, *, min_confidence: float = 0.2) -> GlobalMotion:

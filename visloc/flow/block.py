@@ -156,7 +156,7 @@ def _gauss_newton_step(p_seg: NDArray, q_seg: NDArray, best: NDArray) -> NDArray
     exactly 0 for identical frames, where a parabola through the costs is biased)."""
     s, n, _ = q_seg.shape
     r_idx = np.arange(s)
-    i = np.clip(best, 1, n - 2)
+    i = np.minimum(np.maximum(best, 1), n - 2)
     q0 = q_seg[r_idx, best]
     g = 0.5 * (q_seg[r_idx, i + 1] - q_seg[r_idx, i - 1])
     res = q0 - p_seg
@@ -244,11 +244,9 @@ def block_flow(
     shift = np.where(lay.is_x, sx, sy)
     pos = (lay.start + shift)[:, None] + lay.d[None, :]  # where the segment may be in the second frame
     ok = (pos >= 0) & (pos <= lay.limit[:, None])
-    pos = np.clip(pos, 0, lay.limit[:, None])
-    pw = sliding_window_view(P, seg_len, axis=1)
-    qw = sliding_window_view(Q, seg_len, axis=1)
-    p_seg = pw[lay.band, lay.start]  # (S, L)
-    q_seg = qw[lay.band[:, None], pos]  # (S, D, L)
+    pos = np.minimum(np.maximum(pos, 0), lay.limit[:, None])
+    p_seg = sliding_window_view(P, seg_len, axis=1)[lay.band, lay.start]  # (S, L)
+    q_seg = sliding_window_view(Q, seg_len, axis=1)[lay.band[:, None], pos]  # (S, D, L)
     if not grad:
         p_seg = p_seg - p_seg.mean(axis=1, keepdims=True)
         q_seg = q_seg - q_seg.mean(axis=2, keepdims=True)

@@ -263,10 +263,9 @@ class MarkerDetector:
         for contours, scale, approx in self._propose(gray, base, log):
             if not contours:
                 continue
-            # a candidate an earlier pass already proposed costs nothing more
+            # a candidate that an earlier pass already proposed and fitted costs nothing more
             fresh = _distinct(np.concatenate([seen, approx]))
             fresh = fresh[fresh >= len(seen)] - len(seen)
-            seen = np.concatenate([seen, approx[fresh]])
             if not len(fresh):
                 continue
             # a cheap, lenient look at the cells through the polygon corners: most texture
@@ -290,6 +289,7 @@ class MarkerDetector:
                 cands.contours.append(contour)
                 cands.scales.append(float(scale[0]))
                 cands.splits.append(res[1])
+                seen = np.concatenate([seen, approx[i : i + 1]])
         if not cands.quads:
             return []
         quads = np.array(cands.quads)

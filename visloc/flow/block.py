@@ -100,10 +100,16 @@ def _profile(g: NDArray, k: int, gradient: bool) -> NDArray:
     return np.diff(bands, axis=1) if gradient else bands
 
 
-def _best_and_ratio(cost: NDArray) -> tuple[NDArray, NDArray]:
-    """Best index per row of ``cost`` (S, D) and the ratio of the best cost to the best one at
-    least two steps away (0 = an unambiguous minimum; 1 = none, or a minimum at the end of the
-    search range or without curvature)."""
+def _best_shifts(cost: NDArray, p_seg: NDArray, q_seg: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+    """Per segment: the best integer shift index, its sub-pixel offset, and an ambiguity ratio.
+
+    The offset is one Gauss-Newton step on the squared difference around the best shift,
+    ``s = -sum(g r) / sum(g^2)`` with ``r = q - p`` there and ``g`` the profile's derivative
+    (exact for a pure shift of a linear profile, and exactly 0 for identical frames, where a
+    parabola through the costs is biased). The ratio is the best cost over the best one at
+    least two steps away: 0 for an unambiguous minimum, 1 for none (or one at the end of the
+    search range, or without curvature).
+    """
     s, n = cost.shape
     r = np.arange(s)
     i = np.argmin(cost, axis=1)
@@ -112,11 +118,15 @@ def _best_and_ratio(cost: NDArray) -> tuple[NDArray, NDArray]:
     masked = cost.copy()
     masked[r, im] = masked[r, i] = masked[r, ip] = np.inf
     second = masked.min(axis=1)
+    g = 0.5 * (q_seg[r, ip] - q_seg[r, im])
+    gg = np.einsum("sl,sl->s", g, g)
+    step = -np.einsum("sl,sl->s", g, q_seg[r, i] - p_seg) / np.maximum(gg, 1e-12)
     with np.errstate(invalid="ignore", divide="ignore"):  # rows with no valid cost
         den = cost[r, im] + cost[r, ip] - 2.0 * c0
-        curved = (den > 0) & np.isfinite(den)  # a proper minimum inside the valid range
-        ratio = np.where(np.isfinite(second) & (second > 0), c0 / second, 1.0)
-    return i, np.where((i > 0) & (i < n - 1) & curved, ratio, 1.0)
+        good = (i > 0) & (i < n - 1) & (den > 0) & np.isfinite(den)  # a proper inner minimum
+        ratio = np.where(good & np.isfinite(second) & (second > 0), c0 / second, 1.0)
+    off = np.where(good & (gg > 0), np.clip(step, -0.75, 0.75), 0.0)
+    return i, off, ratio
 
 
 class _Layout(NamedTuple):
@@ -147,22 +157,6 @@ def _layout(rows: int, cols: int, bsz: int, stp: int, srch: int, lx: int, ly: in
     for arr in (band, start, limit, is_x, centers):
         arr.setflags(write=False)
     return _Layout(nby, nbx, max(lx, ly), band, start, limit, is_x, np.arange(-srch, srch + 1), centers)
-
-
-def _gauss_newton_step(p_seg: NDArray, q_seg: NDArray, best: NDArray) -> NDArray:
-    """Sub-pixel offset of each segment around its best integer shift: one Gauss-Newton step
-    on the squared difference, ``s = -sum(g r) / sum(g^2)`` with ``r = q - p`` at the best shift
-    and ``g`` the profile's derivative there (exact for a pure shift of a linear profile, and
-    exactly 0 for identical frames, where a parabola through the costs is biased)."""
-    s, n, _ = q_seg.shape
-    r_idx = np.arange(s)
-    i = np.minimum(np.maximum(best, 1), n - 2)
-    q0 = q_seg[r_idx, best]
-    g = 0.5 * (q_seg[r_idx, i + 1] - q_seg[r_idx, i - 1])
-    res = q0 - p_seg
-    den = np.einsum("sl,sl->s", g, g)
-    step = -np.einsum("sl,sl->s", g, res) / np.maximum(den, 1e-12)
-    return np.where((best > 0) & (best < n - 1) & (den > 0), np.clip(step, -0.75, 0.75), 0.0)
 
 
 def block_flow(
@@ -252,8 +246,7 @@ def block_flow(
         q_seg = q_seg - q_seg.mean(axis=2, keepdims=True)
     diff = q_seg - p_seg[:, None, :]
     cost = np.where(ok, np.einsum("sdl,sdl->sd", diff, diff), np.inf)
-    best, ratio = _best_and_ratio(cost)
-    off = _gauss_newton_step(p_seg, q_seg, best)
+    best, off, ratio = _best_shifts(cost, p_seg, q_seg)
     disp = (shift + lay.d[best] + off).reshape(2, -1)
     texture = np.einsum("sl,sl->s", p_seg, p_seg).reshape(2, -1).min(axis=0)
     ratio = ratio.reshape(2, -1).max(axis=0)

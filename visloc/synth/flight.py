@@ -1,31 +1,26 @@
 """Flights of a downward-looking camera over flat textured ground, with exact motion truth.
 
-Made to test and benchmark optical-flow ground-velocity estimation (a drone's bottom camera,
-such as the AR.Drone 2.0's 320 x 240 at 60 FPS, flying over grass).
+For testing and benchmarking optical-flow ground-velocity estimation (a drone's bottom camera,
+e.g. the AR.Drone 2.0's 320 x 240 at 60 FPS, flying over grass).
 
-Geometry
---------
-World frame: X, Y horizontal, Z up; the ground is the plane ``Z = 0``. Ground point
-``(X, Y)`` shows texel ``(u, v) = (X, Y) / metres_per_texel`` of a texture mirror-tiled
-without end (seamless, infinite). The camera frame is OpenCV's (x right, y down in the image,
-z forward along the optical axis); its centre is ``C = (X, Y, h)`` with height ``h > 0``.
-With zero roll and pitch it looks straight down and its yaw ``psi`` turns x in the ground
-plane: ``x = (cos psi, sin psi, 0)``, ``y = (sin psi, -cos psi, 0)``, ``z = (0, 0, -1)``.
-Roll and pitch turn the camera about its own x and y axes::
+Geometry. World frame: X, Y horizontal, Z up; the ground is the plane ``Z = 0``; ground point
+``(X, Y)`` shows texel ``(u, v) = (X, Y) / metres_per_texel`` of a texture mirror-tiled without
+end. Camera frame: OpenCV's (x right, y down in the image, z along the optical axis), centre
+``C = (X, Y, h)``, height ``h > 0``. With no roll or pitch it looks straight down and its yaw
+``psi`` turns x in the ground plane: ``x = (cos psi, sin psi, 0)``, ``y = (sin psi, -cos psi,
+0)``, ``z = (0, 0, -1)``. Roll and pitch turn it about its own x and y axes::
 
-    R_world_cam = Rz(psi) @ diag(1, -1, -1) @ Rx(roll) @ Ry(pitch)
+    R_world_cam = Rz(psi) @ diag(1, -1, -1) @ Rx(roll) @ Ry(pitch)   # columns: camera axes
 
-(columns: camera axes in world coordinates). At yaw 0, no tilt, a ground point
-``(C_x + dx, C_y + dy)`` lands on pixel ``(cx + f dx / h, cy - f dy / h)``.
+so at yaw 0, no tilt, ground point ``(C_x + dx, C_y + dy)`` lands on pixel
+``(cx + f dx / h, cy - f dy / h)``.
 
-Rates and velocities
---------------------
-``(roll_rate, pitch_rate, yaw_rate)`` is the camera's angular velocity in its own x, y, z
+Rates. ``(roll_rate, pitch_rate, yaw_rate)`` is the camera's angular velocity in its own x, y, z
 axes (rad/s, right-handed). A positive ``yaw_rate`` turns camera +x towards camera +y, i.e.
-about world -Z (clockwise seen from above): with no tilt ``yaw_rate = -dpsi/dt``, and the
-image content turns the other way, by ``-yaw_rate * dt`` (from image x towards image y).
-``v_cam`` is the camera velocity in its own x, y axes (m/s); a camera moving along its +x
-sees the ground move towards image -x by ``f * dx / h`` pixels.
+about world -Z (clockwise seen from above): with no tilt ``yaw_rate = -dpsi/dt``, and the image
+content turns the other way, by ``-yaw_rate * dt`` (from image x towards image y). ``v_cam`` is
+the camera velocity along its own x, y axes (m/s): moving along +x, the camera sees the ground
+move towards image -x by ``f * dx / h`` pixels.
 """
 
 from __future__ import annotations
@@ -39,6 +34,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
 
 from visloc.synth._checks import check_camera, check_int, check_number, check_size
 from visloc.synth.datasets import write_camera_yml
@@ -56,28 +52,25 @@ _CSV_COLUMNS = ("frame,t,x,y,height,yaw,roll,pitch,vx,vy,yaw_rate,roll_rate,pitc
 
 @dataclass(frozen=True, eq=False)
 class FlightTrack:
-    """Camera poses and exact motion ground truth at the frame times (see module docstring).
+    """Camera poses and exact motion ground truth at the frame times (module docstring).
 
     Attributes
     ----------
     t : ndarray (N,)
         Frame times, s.
-    position : ndarray (N, 3)
-        Camera centre ``(X, Y, h)`` in the world frame, m.
+    position, velocity : ndarray (N, 3)
+        Camera centre ``(X, Y, h)`` (m) and its velocity (m/s), world frame.
     yaw, roll, pitch : ndarray (N,)
-        Attitude angles, rad; ``yaw`` wrapped to ``[-pi, pi)``.
-    velocity : ndarray (N, 3)
-        Camera velocity in the world frame, m/s.
+        Attitude, rad; ``yaw`` (``psi``) wrapped to ``[-pi, pi)``.
     v_cam : ndarray (N, 2)
-        Instantaneous camera velocity along its own x and y axes, m/s.
+        Instantaneous velocity along the camera's own x and y axes, m/s.
     yaw_rate, roll_rate, pitch_rate : ndarray (N,)
         Angular velocity about the camera's z, x and y axes, rad/s.
     pair_v : ndarray (N, 2)
-        Row k >= 1: displacement from frame k-1 to k in frame k-1's camera x, y axes, over
-        ``dt``; row 0 is NaN.
+        Row k >= 1: displacement from frame k-1 to k in frame k-1's camera x, y axes, / dt.
     pair_yaw_rate : ndarray (N,)
-        Row k >= 1: ``-(psi_k - psi_{k-1}) / dt`` (unwrapped), the mean yaw rate about camera
-        +z between the frames (exact when roll and pitch are 0); row 0 is NaN.
+        Row k >= 1: ``-(psi_k - psi_{k-1}) / dt`` (unwrapped), the mean rate about camera +z
+        (exact without roll and pitch). Row 0 of the ``pair_*`` arrays is NaN.
     """
 
     t: FloatArray
@@ -103,26 +96,17 @@ class FlightTrack:
 
     def pose(self, k: int) -> tuple[FloatArray, FloatArray]:
         """``(R_world_cam, C)`` of frame ``k``, as :func:`render_ground_view` takes it."""
-        return _rotations(self.yaw[k : k + 1], self.roll[k : k + 1], self.pitch[k : k + 1])[0], \
-            self.position[k].copy()
+        k = range(len(self.t))[k]
+        sl = slice(k, k + 1)
+        return _rotations(self.yaw[sl], self.roll[sl], self.pitch[sl])[0], self.position[k].copy()
 
 
 @dataclass(frozen=True, eq=False)
 class Flight:
-    """A rendered flight: frames, their ground truth and the camera.
-
-    Attributes
-    ----------
-    frames : ndarray (N, H, W) uint8
-        The images.
-    track : FlightTrack
-        Poses and motion ground truth of every frame.
-    K : ndarray (3, 3)
-        Pinhole camera matrix (no distortion).
-    params : dict
-        Render settings: ``seconds``, ``fps``, ``size`` ``(w, h)``, ``seed``, ``texture``,
-        ``noise_sigma``, ``blur_sigma``, ``metres_per_texel`` and the trajectory options.
-    """
+    """A rendered flight: ``frames`` (N, H, W) uint8, their ground truth ``track``, the
+    camera matrix ``K`` (3, 3, no distortion) and the render settings ``params`` (``seconds``,
+    ``fps``, ``size``, ``seed``, ``texture``, ``noise_sigma``, ``blur_sigma``,
+    ``metres_per_texel`` and the trajectory options)."""
 
     frames: NDArray[np.uint8]
     track: FlightTrack
@@ -131,15 +115,8 @@ class Flight:
 
 
 def _rotations(yaw: FloatArray, roll: FloatArray, pitch: FloatArray) -> FloatArray:
-    """``Rz(yaw) @ diag(1, -1, -1) @ Rx(roll) @ Ry(pitch)`` for each frame, (N, 3, 3)."""
-    n = len(yaw)
-    cz, sz, cx, sx, cy, sy = (np.cos(yaw), np.sin(yaw), np.cos(roll), np.sin(roll),
-                              np.cos(pitch), np.sin(pitch))
-    o, z = np.ones(n), np.zeros(n)
-    a = np.stack([np.stack(r, -1) for r in ([cz, sz, z], [sz, -cz, z], [z, z, -o])], -2)
-    rx = np.stack([np.stack(r, -1) for r in ([o, z, z], [z, cx, -sx], [z, sx, cx])], -2)
-    ry = np.stack([np.stack(r, -1) for r in ([cy, z, sy], [z, o, z], [-sy, z, cy])], -2)
-    return a @ rx @ ry
+    """``Rz(yaw) @ Rx(pi) @ Rx(roll) @ Ry(pitch)`` per frame, (N, 3, 3)."""
+    return Rotation.from_euler("ZXY", np.column_stack([yaw, np.pi + roll, pitch])).as_matrix()
 
 
 def _frame_times(seconds: object, fps: object, t0: object = 0.0) -> FloatArray:

@@ -1,11 +1,24 @@
-"""Renderers with exact ground truth (markers; later grids, ground textures, IMU).
+"""Renderers with exact ground truth (markers, bottom-camera flights; later grids, IMU).
 
 Marker renders: :func:`render_markers` draws given marker poses, :func:`random_scene` draws
 random scenes of graded difficulty, :func:`render_dataset` and :func:`render_video` write
 them to disk with ``ground_truth.json`` and an OpenCV ``camera.yml``.
+
+Flights: :func:`render_flight` renders a downward-looking camera flying a
+:func:`flight_trajectory` (or :func:`straight_track`) over textured ground, with exact
+velocity and yaw-rate ground truth (:class:`FlightTrack`); :func:`write_flight` writes it.
 """
 
 from visloc.synth.datasets import render_dataset, render_video, write_camera_yml
+from visloc.synth.flight import (
+    Flight,
+    FlightTrack,
+    flight_trajectory,
+    render_flight,
+    render_ground_view,
+    straight_track,
+    write_flight,
+)
 from visloc.synth.markers import (
     MarkerRender,
     RenderedMarker,
@@ -21,15 +34,22 @@ __all__ = [
     "DIFFICULTIES",
     "MARKER_LENGTH",
     "TEXTURES",
+    "Flight",
+    "FlightTrack",
     "MarkerRender",
     "RenderedMarker",
     "default_camera",
+    "flight_trajectory",
     "marker_object_points",
     "polygon_coverage",
     "project_points",
     "random_scene",
     "render_dataset",
+    "render_flight",
+    "render_ground_view",
     "render_markers",
     "render_video",
+    "straight_track",
     "write_camera_yml",
+    "write_flight",
 ]

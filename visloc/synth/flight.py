@@ -175,26 +175,24 @@ def flight_trajectory(
 ) -> FlightTrack:
     """A smooth random flight, evaluated in closed form at ``t_k = t0 + k / fps``.
 
-    Horizontal velocity is a sum of three vectors of fixed length turning at random rates
-    (so the path is a sum of circles), height, roll and pitch are sums of three sinusoids and
-    yaw a drift plus three sinusoids. The bounds hold for all t: speed (3-D) <= ``max_speed``,
-    height in ``height``, ``|yaw_rate| <= max_yaw_rate``, ``|roll|, |pitch| <= roll_pitch``.
-    The path depends on the generator only, not on ``seconds``, ``fps`` or ``t0``.
+    Horizontal velocity is a sum of three vectors of fixed length turning at random rates (the
+    path is a sum of circles); height, roll and pitch are sums of three sinusoids, yaw a drift
+    plus three sinusoids. For all t: 3-D speed <= ``max_speed``, height within ``height``,
+    ``|yaw_rate| <= max_yaw_rate``, ``|roll|, |pitch| <= roll_pitch``. The path depends on the
+    generator only, not on ``seconds``, ``fps`` or ``t0``.
 
     Parameters
     ----------
     rng_or_seed : int or numpy.random.Generator
         Source of the random path.
     seconds, fps : float
-        Duration (> 0) and frame rate (> 0); ``max(1, round(seconds * fps))`` frames.
-    max_speed : float
-        Bound of the speed, m/s (>= 0).
+        Duration and frame rate (> 0): ``max(1, round(seconds * fps))`` frames.
+    max_speed, max_yaw_rate : float
+        Bounds of the speed (m/s) and of the yaw rate (rad/s), >= 0.
     height : float or (float, float)
         Constant height or ``(low, high)`` range, m (> 0).
-    max_yaw_rate : float
-        Bound of the yaw rate, rad/s (>= 0).
     roll_pitch : float
-        Amplitude of roll and pitch, rad (in [0, 0.5]).
+        Amplitude of roll and pitch, rad, in [0, 0.5].
     t0 : float
         Time of the first frame, s.
 
@@ -202,31 +200,25 @@ def flight_trajectory(
     -------
     FlightTrack
     """
-    if isinstance(rng_or_seed, np.random.Generator):
-        rng = rng_or_seed
-    elif isinstance(rng_or_seed, numbers.Integral) and not isinstance(rng_or_seed, bool):
-        rng = np.random.default_rng(int(rng_or_seed))
-    else:
-        raise TypeError(f"rng_or_seed must be an int or a numpy Generator, got "
-                        f"{type(rng_or_seed).__name__}")
+    if not isinstance(rng_or_seed, (np.random.Generator, numbers.Integral)) \
+            or isinstance(rng_or_seed, bool):
+        raise TypeError(f"rng_or_seed must be an int or a Generator, got {rng_or_seed!r}")
+    rng = np.random.default_rng(rng_or_seed)
     t = _frame_times(seconds, fps, t0)
     vmax = check_number(max_speed, "max_speed", low=0.0)
     ymax = check_number(max_yaw_rate, "max_yaw_rate", low=0.0)
     amp = check_number(roll_pitch, "roll_pitch", low=0.0, high=0.5)
     lo, hi = _check_height(height)
-    # height: mid + A s(t), vertical speed <= 0.4 max_speed
-    s, ds, bound = _sines(rng, t, 3, 0.1, 0.6)
+    s, ds, bound = _sines(rng, t, 3, 0.1, 0.6)  # height mid + a_h s(t), |dh/dt| <= 0.4 vmax
     a_h = min(0.5 * (hi - lo), 0.4 * vmax / bound)
-    h, dh = 0.5 * (lo + hi) + a_h * s, a_h * ds
     v_h = np.sqrt(max(vmax**2 - (a_h * bound) ** 2, 0.0))  # bound of the horizontal speed
-    # horizontal: sum of a_i (cos th_i, sin th_i), th_i = w_i t + p_i; sum a_i = v_h
-    a = rng.uniform(0.2, 1.0, 3)
+    a = rng.uniform(0.2, 1.0, 3)  # velocity sum a_i (cos th_i, sin th_i), sum a_i = v_h
     a *= v_h / a.sum()
     w = rng.uniform(0.15, 0.8, 3) * rng.choice([-1.0, 1.0], 3)
     th = np.outer(t, w) + rng.uniform(0.0, 2.0 * np.pi, 3)
-    start = rng.uniform(0.0, 10.0, 2)
-    xy = start + np.stack([np.sin(th) @ (a / w), -np.cos(th) @ (a / w)], -1)
-    vxy = np.stack([np.cos(th) @ a, np.sin(th) @ a], -1)
+    pos = np.column_stack([rng.uniform(0.0, 10.0, 2) + np.column_stack(
+        [np.sin(th) @ (a / w), -np.cos(th) @ (a / w)]), 0.5 * (lo + hi) + a_h * s])
+    vel = np.column_stack([np.cos(th) @ a, np.sin(th) @ a, a_h * ds])
     roll, droll, b_roll = _sines(rng, t, 3, 0.5, 3.0)
     pitch, dpitch, _ = _sines(rng, t, 3, 0.5, 3.0)
     # |yaw_rate| <= |droll| |sin pitch| + |dpsi|: keep |dpsi| <= max_yaw_rate - that margin
@@ -235,10 +227,8 @@ def flight_trajectory(
     s, ds, bound = _sines(rng, t, 3, 0.1, 1.0)
     k = (y - abs(drift)) / bound
     psi = rng.uniform(-np.pi, np.pi) + drift * t + k * s
-    dpsi = drift + k * ds
-    return _make_track(t, np.column_stack([xy, h]), np.column_stack([vxy, dh]),
-                       np.stack([psi, amp * roll, amp * pitch]),
-                       np.stack([dpsi, amp * droll, amp * dpitch]))
+    return _make_track(t, pos, vel, np.stack([psi, amp * roll, amp * pitch]),
+                       np.stack([drift + k * ds, amp * droll, amp * dpitch]))
 
 
 def straight_track(
@@ -251,23 +241,22 @@ def straight_track(
     yaw: float = 0.0,
     start: tuple[float, float] = (0.0, 0.0),
 ) -> FlightTrack:
-    """A level flight at constant height, constant ``v_cam`` and constant yaw rate.
+    """A level flight at constant height, ``v_cam`` and yaw rate, in closed form from t = 0.
 
-    With ``yaw_rate = 0`` the path is straight; otherwise it is a circle flown at constant
-    speed (exact in closed form).
+    The path is straight when ``yaw_rate = 0``, otherwise a circle flown at constant speed.
 
     Parameters
     ----------
     seconds, fps : float
-        Duration (> 0) and frame rate (> 0); ``max(1, round(seconds * fps))`` frames from t=0.
+        Duration and frame rate (> 0): ``max(1, round(seconds * fps))`` frames.
     velocity : (float, float)
-        ``v_cam``: velocity along the camera's own x and y axes, m/s.
+        ``v_cam``, velocity along the camera's own x and y axes, m/s.
     yaw_rate : float
-        Rate about camera +z, rad/s (``psi(t) = yaw - yaw_rate * t``).
+        Rate about camera +z, rad/s: ``psi(t) = yaw - yaw_rate * t``.
     height : float
         Height, m (> 0).
     yaw : float
-        Yaw ``psi`` at t = 0, rad.
+        ``psi`` at t = 0, rad.
     start : (float, float)
         Ground position ``(X, Y)`` at t = 0, m.
 
@@ -281,17 +270,14 @@ def straight_track(
     r = check_number(yaw_rate, "yaw_rate")
     h = check_number(height, "height", low=0.0, low_open=True)
     psi0 = check_number(yaw, "yaw")
-    psi = psi0 - r * t
-    # integral of the world velocity: chord = t sinc(r t / 2) rotated to the mid-angle
-    chord = t * np.sinc(r * t / (2.0 * np.pi))
-    mid = psi0 - 0.5 * r * t
-    cm, sm = np.cos(mid), np.sin(mid)
+    # integral of the world velocity: the chord t sinc(r t / 2), turned to the mid-angle
+    chord, mid = t * np.sinc(r * t / (2.0 * np.pi)), psi0 - 0.5 * r * t
+    cm, sm, c, s = np.cos(mid), np.sin(mid), np.cos(psi0 - r * t), np.sin(psi0 - r * t)
     pos = np.column_stack([x0 + chord * (vx * cm + vy * sm), y0 + chord * (vx * sm - vy * cm),
                            np.full_like(t, h)])
-    c, s = np.cos(psi), np.sin(psi)
     vel = np.column_stack([vx * c + vy * s, vx * s - vy * c, np.zeros_like(t)])
     zero = np.zeros_like(t)
-    return _make_track(t, pos, vel, np.stack([psi, zero, zero]),
+    return _make_track(t, pos, vel, np.stack([psi0 - r * t, zero, zero]),
                        np.stack([np.full_like(t, -r), zero, zero]))
 
 
@@ -313,15 +299,15 @@ def _check_height(height: object) -> tuple[float, float]:
 
 @lru_cache(maxsize=8)
 def _named_mipmap(name: str) -> tuple[NDArray[np.float32], ...]:
-    if name == "noise":
-        return _mipmap(smooth_noise((512, 512), np.random.default_rng(0)))
-    return _mipmap(_photo_texture(name))
+    tex = smooth_noise((512, 512), np.random.default_rng(0)) if name == "noise" else \
+        _photo_texture(name)
+    return _mipmap(tex)
 
 
 def _mipmap(texture: NDArray) -> tuple[NDArray[np.float32], ...]:
-    """Levels 0, 1, 2 (1x, 2x, 4x): Gaussian pre-blur then 2 x 2 box averages. Unlike
-    ``cv2.pyrDown``, texel ``j`` of a level covers texels ``2j, 2j+1`` of the one above, so
-    each level stays exactly mirror-symmetric at the tile edges (seamless tiling)."""
+    """Levels 1x, 2x, 4x: Gaussian pre-blur, then 2 x 2 box means. Unlike ``cv2.pyrDown``,
+    texel j of a level covers texels 2j, 2j+1 of the one above, so each level stays exactly
+    mirror-symmetric at the tile edges: the tiling stays seamless."""
     levels = [np.ascontiguousarray(texture, dtype=np.float32)]
     while len(levels) < 3 and all(n % 2 == 0 and n >= 8 for n in levels[-1].shape):
         blurred = cv2.GaussianBlur(levels[-1], (0, 0), 0.7, borderType=cv2.BORDER_REFLECT)
@@ -348,21 +334,20 @@ def _ground_mipmap(texture: object) -> tuple[tuple[NDArray[np.float32], ...], st
 @lru_cache(maxsize=8)
 def _rays(k_bytes: bytes, w: int, h: int, s: int) -> NDArray[np.float32]:
     """(3, h*s * w*s) rays ``K^-1 [x, y, 1]`` through the supersample centres, row-major."""
-    k_inv = np.linalg.inv(np.frombuffer(k_bytes).reshape(3, 3))
     ys, xs = np.meshgrid((np.arange(h * s) + 0.5) / s - 0.5, (np.arange(w * s) + 0.5) / s - 0.5,
                          indexing="ij")
     pix = np.stack([xs.ravel(), ys.ravel(), np.ones(xs.size)])
-    return np.ascontiguousarray(k_inv @ pix, dtype=np.float32)
+    return np.ascontiguousarray(np.linalg.inv(np.frombuffer(k_bytes).reshape(3, 3)) @ pix,
+                                dtype=np.float32)
 
 
 def _check_pose(pose: object) -> tuple[FloatArray, FloatArray]:
     if not isinstance(pose, (tuple, list)) or len(pose) != 2:
         raise TypeError(f"pose_world_from_cam must be a pair (R, C), got {type(pose).__name__}")
     R, C = (np.asarray(v, dtype=np.float64) for v in pose)
-    if R.shape != (3, 3) or C.shape != (3,) or not np.all(np.isfinite(R)) \
-            or not np.all(np.isfinite(C)):
-        raise ValueError(f"pose_world_from_cam must be finite R (3, 3), C (3,), got "
-                         f"{R.shape}, {C.shape}")
+    if R.shape != (3, 3) or C.shape != (3,) or not np.isfinite(np.r_[R.ravel(), C]).all():
+        raise ValueError(f"pose_world_from_cam must be finite R (3, 3), C (3,), got {R.shape}, "
+                         f"{C.shape}")
     if not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
         raise ValueError("pose_world_from_cam: R must be a rotation matrix")
     if C[2] <= 0:
@@ -374,29 +359,27 @@ def _render(levels: tuple[NDArray[np.float32], ...], K: FloatArray, size: tuple[
             R: FloatArray, C: FloatArray, mpt: float, s: int) -> NDArray[np.float32]:
     """The noiseless ground view, float32 (H, W); arguments already checked."""
     w, h = size
-    corners = np.linalg.inv(K) @ np.array([[-0.5, w - 0.5, -0.5, w - 0.5],
-                                           [-0.5, -0.5, h - 0.5, h - 0.5], [1.0, 1.0, 1.0, 1.0]])
+    k_inv = np.linalg.inv(K)
+    corners = k_inv @ np.array([[-0.5, w - 0.5, -0.5, w - 0.5], [-0.5, -0.5, h - 0.5, h - 0.5],
+                                [1.0, 1.0, 1.0, 1.0]])
     if np.max((R @ corners)[2]) >= -1e-9:  # ray z is linear in the pixel: corners suffice
         raise ValueError("pose_world_from_cam: part of the view misses the ground (horizon)")
-    depth = -C[2] / float(R[2] @ np.linalg.inv(K) @ np.array([K[0, 2], K[1, 2], 1.0]))
+    depth = -C[2] / float(R[2] @ k_inv @ np.array([K[0, 2], K[1, 2], 1.0]))
     texels = depth / (np.sqrt(K[0, 0] * K[1, 1]) * mpt)  # texels per pixel at the centre
     level = min(int(np.ceil(np.log2(max(texels / 1.5, 1.0)))), len(levels) - 1)
-    tex = levels[level]
-    scale = 2.0**level
+    tex, scale = levels[level], 2.0**level
     d = R.astype(np.float32) @ _rays(np.asarray(K, np.float64).tobytes(), w, h, s)
     lam = np.float32(-C[2] / (mpt * scale)) / d[2]  # ray length to the ground, in texels
     maps = []
     for axis, n in ((0, tex.shape[1]), (1, tex.shape[0])):
         # level coordinate (u0 + 0.5) / 2^L - 0.5; mirror-tile: period 2n, fold about n - 0.5
-        base = (C[axis] / (mpt * scale) + 0.5 / scale - 0.5) % (2 * n)
         u = d[axis] * lam
-        u += np.float32(base)
+        u += np.float32((C[axis] / (mpt * scale) + 0.5 / scale - 0.5) % (2 * n))
         u -= np.float32(2 * n) * np.floor(u * np.float32(0.5 / n))
         u -= np.float32(n - 0.5)
-        np.abs(u, out=u)
-        maps.append((np.float32(n - 0.5) - u).reshape(h * s, w * s))
+        maps.append((np.float32(n - 0.5) - np.abs(u, out=u)).reshape(h * s, w * s))
     img = cv2.remap(tex, maps[0], maps[1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
-    return img if s == 1 else cv2.resize(img, (w, h), interpolation=cv2.INTER_AREA)
+    return img if s == 1 else cv2.resize(img, (w, h), interpolation=cv2.INTER_AREA)  # S x S mean
 
 
 def render_ground_view(
@@ -411,32 +394,26 @@ def render_ground_view(
     noise_sigma: float = 0.0,
     blur_sigma: float = 0.0,
 ) -> NDArray[np.uint8]:
-    """Render the textured ground plane ``Z = 0`` as seen by a pinhole camera.
+    """Render the textured ground plane ``Z = 0`` seen by a pinhole camera.
 
-    Each pixel averages ``supersample**2`` bilinear texture samples (``cv2.remap``) at
-    ``((c + 0.5) / S - 0.5, (r + 0.5) / S - 0.5)``, each the ground point hit by the ray
-    ``R K^-1 [x, y, 1]`` from ``C``. When a pixel covers more than 1.5 texels at the
-    principal point, a pre-blurred 2x or 4x smaller texture level is sampled instead.
+    Each pixel is the mean of ``supersample**2`` bilinear texture samples (``cv2.remap``) at
+    ``((c + 0.5) / S - 0.5, (r + 0.5) / S - 0.5)``, where the rays ``R K^-1 [x, y, 1]`` from
+    ``C`` hit the ground. When a pixel spans more than 1.5 texels at the principal point, a
+    pre-blurred 2x or 4x smaller level of the texture is sampled instead (anti-aliasing).
 
     Parameters
     ----------
-    K : array_like (3, 3)
-        Pinhole camera matrix.
-    size : (int, int)
-        ``(width, height)``.
-    pose_world_from_cam : (R, C)
-        ``R_world_cam`` (3, 3) (columns: camera axes in the world) and camera centre C (3,)
-        with ``C_z > 0``.
+    K, size : array_like (3, 3), (int, int)
+        Pinhole camera matrix and image ``(width, height)``.
+    pose_world_from_cam : (ndarray (3, 3), ndarray (3,))
+        ``(R_world_cam, C)``: camera axes in world coordinates (columns), centre with C_z > 0.
     texture : str or ndarray (H, W)
-        A name from :data:`GROUND_TEXTURES` or a grey image (uint8 or float), mirror-tiled.
-    metres_per_texel : float
-        Ground size of a texel, m (> 0).
-    supersample : int
-        Samples per pixel along each axis, 1 to 8.
-    rng : numpy.random.Generator or None
-        Noise source (a fresh unseeded one when None).
-    noise_sigma, blur_sigma : float
-        Gaussian sensor noise (grey levels) and optical blur (px), >= 0.
+        A name from :data:`GROUND_TEXTURES` or a grey image (uint8 or float).
+    metres_per_texel, supersample : float, int
+        Ground size of a texel (m, > 0); samples per pixel along each axis (1 to 8).
+    rng, noise_sigma, blur_sigma : numpy.random.Generator or None, float, float
+        Noise source (None: a fresh unseeded one), Gaussian sensor noise (grey levels) and
+        optical blur (px), >= 0, applied by :func:`~visloc.synth.textures.degrade`.
 
     Returns
     -------
@@ -445,7 +422,7 @@ def render_ground_view(
     Raises
     ------
     ValueError
-        If part of the view misses the ground, or an argument is out of range.
+        If part of the view misses the ground (horizon), or an argument is out of range.
     """
     levels, _ = _ground_mipmap(texture)
     K = check_camera(K)
@@ -456,17 +433,27 @@ def render_ground_view(
     noise = check_number(noise_sigma, "noise_sigma", low=0.0)
     blur = check_number(blur_sigma, "blur_sigma", low=0.0)
     img = _render(levels, K, (w, h), R, C, mpt, s)
-    out, _ = degrade(img, rng if rng is not None else np.random.default_rng(),
-                     blur_sigma=blur, noise_sigma=noise)
-    return out
+    return degrade(img, rng if rng is not None else np.random.default_rng(), blur_sigma=blur,
+                   noise_sigma=noise)[0]
 
 
 def default_bottom_camera(size: tuple[int, int] = (320, 240)) -> FloatArray:
-    """AR.Drone 2.0 bottom camera matrix scaled to ``size``: ``f = 320.067 w / 320``,
-    principal point at the image centre ``((w - 1) / 2, (h - 1) / 2)``."""
+    """AR.Drone 2.0 bottom camera matrix (calib/ardrone2_bottom_320x240.yml) scaled to
+    ``size``: ``f = 320.0669 w / 320``, principal point ``((w - 1) / 2, (h - 1) / 2)``."""
     w, h = check_size(size)
     f = ARDRONE2_BOTTOM_F * w / 320.0
     return np.array([[f, 0.0, 0.5 * (w - 1)], [0.0, f, 0.5 * (h - 1)], [0.0, 0.0, 1.0]])
+
+
+def _given_track(track: object, fps: object, options: dict) -> FlightTrack:
+    if not isinstance(track, FlightTrack):
+        raise TypeError(f"track must be a FlightTrack or None, got {type(track).__name__}")
+    if options:
+        raise ValueError(f"track cannot be combined with trajectory options {sorted(options)}")
+    fps = check_number(fps, "fps", low=0.0, low_open=True)
+    if len(track.t) > 1 and not np.allclose(np.diff(track.t), 1.0 / fps, rtol=1e-6):
+        raise ValueError(f"track: the frame spacing does not match fps = {fps}")
+    return track
 
 
 def render_flight(
@@ -489,18 +476,17 @@ def render_flight(
     Parameters
     ----------
     seconds, fps : float
-        Duration and frame rate (> 0); with ``track`` given, ``fps`` must match its spacing
-        and ``seconds`` is not used.
+        Duration and frame rate (> 0); with ``track``, ``fps`` must match its frame spacing.
     size : (int, int)
         ``(width, height)``.
     K : array_like (3, 3) or None
         Camera matrix; default :func:`default_bottom_camera` for ``size``.
     seed : int
-        Seed of the trajectory (``default_rng([seed, 1])``) and of the noise (``[seed, 2]``).
+        Seeds the trajectory (``default_rng([seed, 1])``) and the noise (``[seed, 2]``).
     texture, noise_sigma, blur_sigma, metres_per_texel
-        As in :func:`render_ground_view` (supersample 2).
+        As in :func:`render_ground_view` (which renders each frame, supersample 2).
     track : FlightTrack or None
-        Fly this track instead of a random one.
+        Fly this track instead of a random :func:`flight_trajectory`.
     progress : callable or None
         Called as ``progress(k)`` after frame ``k``.
     **trajectory_options
@@ -519,24 +505,14 @@ def render_flight(
     mpt = check_number(metres_per_texel, "metres_per_texel", low=0.0, low_open=True)
     if progress is not None and not callable(progress):
         raise TypeError(f"progress must be a callable or None, got {type(progress).__name__}")
-    if track is None:
-        track = flight_trajectory(np.random.default_rng([seed, 1]), seconds, fps,
-                                  **trajectory_options)
-    else:
-        if not isinstance(track, FlightTrack):
-            raise TypeError(f"track must be a FlightTrack or None, got {type(track).__name__}")
-        if trajectory_options:
-            raise ValueError(f"track cannot be combined with trajectory options "
-                             f"{sorted(trajectory_options)}")
-        fps = check_number(fps, "fps", low=0.0, low_open=True)
-        if len(track) > 1 and not np.allclose(np.diff(track.t), 1.0 / fps, rtol=1e-6):
-            raise ValueError(f"track: frame spacing does not match fps = {fps}")
+    track = flight_trajectory(np.random.default_rng([seed, 1]), seconds, fps,
+                              **trajectory_options) if track is None else \
+        _given_track(track, fps, trajectory_options)
     rng = np.random.default_rng([seed, 2])
-    frames = np.empty((len(track), h, w), np.uint8)
-    rotations = track.R_world_cam
-    for k in range(len(track)):
-        img = _render(levels, K, (w, h), rotations[k], track.position[k], mpt, 2)
-        frames[k], _ = degrade(img, rng, blur_sigma=blur, noise_sigma=noise)
+    frames = np.empty((len(track.t), h, w), np.uint8)
+    for k, R in enumerate(track.R_world_cam):
+        img = _render(levels, K, (w, h), R, track.position[k], mpt, 2)
+        frames[k] = degrade(img, rng, blur_sigma=blur, noise_sigma=noise)[0]
         if progress is not None:
             progress(k)
     params = {"seconds": float(seconds), "fps": float(fps), "size": (w, h), "seed": seed,
@@ -546,24 +522,13 @@ def render_flight(
 
 
 def write_flight(outdir: str | Path, flight: Flight, *, video: bool = False) -> Path:
-    """Write a flight: frames, ``ground_truth.csv``, ``heights.csv`` and ``camera.yml``.
+    """Write a flight to ``outdir`` (created if missing; files are overwritten) and return it.
 
-    Parameters
-    ----------
-    outdir : str or Path
-        Directory (created if missing; existing files are overwritten).
-    flight : Flight
-        From :func:`render_flight`.
-    video : bool
-        Write ``flight.mp4`` (codec mp4v, lossy) instead of ``frame_00000.png``, ...
-
-    Returns
-    -------
-    Path
-        ``outdir``. ``ground_truth.csv`` has one row per frame with the columns
-        ``frame,t,x,y,height,yaw,roll,pitch,vx,vy,yaw_rate,roll_rate,pitch_rate,pair_vx,
-        pair_vy,pair_yaw_rate`` (``vx, vy`` = ``v_cam``; ``pair_*`` of frame 0 are nan);
-        ``heights.csv`` has ``frame,t,height``.
+    Files: ``frame_00000.png``, ... or, with ``video``, ``flight.mp4`` (codec mp4v, lossy);
+    ``ground_truth.csv``, a row per frame with the columns ``frame,t,x,y,height,yaw,roll,pitch,
+    vx,vy,yaw_rate,roll_rate,pitch_rate,pair_vx,pair_vy,pair_yaw_rate`` (``vx, vy`` =
+    ``v_cam``; ``pair_*`` of frame 0 are nan); ``heights.csv`` (``frame,t,height``); and
+    ``camera.yml`` (OpenCV FileStorage, zero distortion).
     """
     if not isinstance(flight, Flight):
         raise TypeError(f"flight must be a Flight, got {type(flight).__name__}")
@@ -571,9 +536,8 @@ def write_flight(outdir: str | Path, flight: Flight, *, video: bool = False) -> 
     out.mkdir(parents=True, exist_ok=True)
     n, h, w = flight.frames.shape
     if video:
-        fps = float(flight.params.get("fps", 30.0))
-        writer = cv2.VideoWriter(str(out / "flight.mp4"), cv2.VideoWriter_fourcc(*"mp4v"), fps,
-                                 (w, h), isColor=False)
+        writer = cv2.VideoWriter(str(out / "flight.mp4"), cv2.VideoWriter_fourcc(*"mp4v"),
+                                 float(flight.params.get("fps", 30.0)), (w, h), isColor=False)
         if not writer.isOpened():
             raise OSError(f"could not open {out / 'flight.mp4'} for writing an mp4v video")
         try:
@@ -592,7 +556,7 @@ def write_flight(outdir: str | Path, flight: Flight, *, video: bool = False) -> 
     fmt = ["%d"] + ["%.10g"] * (rows.shape[1] - 1)
     np.savetxt(out / "ground_truth.csv", rows, fmt=fmt, delimiter=",", header=_CSV_COLUMNS,
                comments="")
-    np.savetxt(out / "heights.csv", rows[:, [0, 1, 4]], fmt=["%d", "%.10g", "%.10g"],
-               delimiter=",", header="frame,t,height", comments="")
+    np.savetxt(out / "heights.csv", rows[:, [0, 1, 4]], fmt=fmt[:3], delimiter=",",
+               header="frame,t,height", comments="")
     write_camera_yml(out / "camera.yml", flight.K, (w, h))
     return out

@@ -1,0 +1,112 @@
+"""Marker maps and the camera pose from all visible markers of a map."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from visloc.markers import MarkerDetector
+from visloc.pose import Camera
+from visloc.pose.map_pose import estimate_camera_pose
+from visloc.pose.maps import GridMap, MarkerMap
+from visloc.synth.grid import random_map_view
+from visloc.types import MarkerDetection
+
+K = np.array([[320.067, 0, 159.5], [0, 320.067, 119.5], [0, 0, 1]])
+CAM = Camera(K, size=(320, 240))
+
+
+def test_grid_layout_ids_and_marker_frames():
+    g = GridMap(2, 3, 0.1, 0.05, first_id=10)
+    assert list(g.ids) == [10, 11, 12, 13, 14, 15]
+    assert np.allclose(g.corners_of(10), [[0, 0, 0], [0.1, 0, 0], [0.1, -0.1, 0], [0, -0.1, 0]])
+    assert np.allclose(g.corners_of(15)[0], [0.3, -0.15, 0])  # row 1, column 2
+    T = g.marker_pose(10)  # the marker's own frame: centre, x right, y up, z out of the face
+    assert np.allclose(T.t, [0.05, -0.05, 0]) and np.allclose(T.R, np.eye(3))
+    L = 0.1
+    own = np.array([[-L / 2, L / 2, 0], [L / 2, L / 2, 0], [L / 2, -L / 2, 0], [-L / 2, -L / 2, 0]])
+    assert np.allclose(T.apply(own), g.corners_of(10))
+
+
+def test_yaml_round_trip(tmp_path):
+    g = GridMap(3, 2, 0.08, 0.02, first_id=5)
+    g.to_file(tmp_path / "map.yml")
+    h = MarkerMap.from_file(tmp_path / "map.yml")
+    assert list(h.ids) == list(g.ids)
+    assert all(np.allclose(h.corners_of(i), g.corners_of(i)) for i in g.ids)
+
+
+def test_bad_maps_are_rejected(tmp_path):
+    square = np.array([[0, 0, 0], [1, 0, 0], [1, -1, 0], [0, -1, 0.0]])
+    with pytest.raises(ValueError, match="duplicate"):
+        MarkerMap.from_list([(1, square), (1, square + 2)])
+    bent = square.copy()
+    bent[2, 2] = 0.3
+    with pytest.raises(ValueError, match="marker 4"):
+        MarkerMap({4: bent})
+    with pytest.raises(ValueError, match="square"):
+        MarkerMap({4: square * [2, 1, 1]})
+    with pytest.raises(ValueError, match="does not exist"):
+        MarkerMap.from_file(tmp_path / "none.yml")
+    (tmp_path / "bad.yml").write_text("%YAML:1.0\nmarkers:\n   - { id: 1, corners: [ 1, 2, 3 ] }\n")
+    with pytest.raises(ValueError, match="12"):
+        MarkerMap.from_file(tmp_path / "bad.yml")
+    with pytest.raises(ValueError, match="rows"):
+        GridMap(0, 2, 0.1, 0.0)
+
+
+def test_pose_from_exact_corners_recovers_the_camera():
+    g = GridMap(4, 4, 0.1, 0.05)
+    R_map_cam = Rotation.from_euler("xyz", [175, 8, 30], degrees=True).as_matrix()
+    pos = np.array([0.3, -0.25, 1.1])
+    R, t = R_map_cam.T, -R_map_cam.T @ pos
+    dets = []
+    for i in g.ids:
+        q = g.corners_of(i) @ R.T + t
+        dets.append(MarkerDetection(int(i), (q[:, :2] / q[:, 2:]) @ K[:2, :2].T + K[:2, 2]))
+    dets.append(MarkerDetection(99, dets[0].corners + 5.0))  # not in the map
+    mp = estimate_camera_pose(dets, g, CAM)
+    assert np.allclose(mp.position, pos, atol=1e-6)
+    assert np.allclose(mp.R_map_cam, R_map_cam, atol=1e-7)
+    assert mp.unknown == [99] and mp.rejected == [] and len(mp.used) == 16
+    assert mp.pose.reprojection_rms < 1e-4
+    assert np.allclose(mp.state[:3], pos, atol=1e-6)
+
+
+def test_a_marker_inconsistent_with_the_rest_is_rejected():
+    g = GridMap(3, 3, 0.1, 0.05)
+    R_map_cam = np.diag([1.0, -1.0, -1.0])
+    pos = np.array([0.2, -0.2, 0.9])
+    R, t = R_map_cam.T, -R_map_cam.T @ pos
+    dets = []
+    for i in g.ids:
+        q = g.corners_of(i) @ R.T + t
+        c = (q[:, :2] / q[:, 2:]) @ K[:2, :2].T + K[:2, 2]
+        dets.append(MarkerDetection(int(i), c + (12.0 if i == 4 else 0.0)))  # marker 4 moved
+    mp = estimate_camera_pose(dets, g, CAM)
+    assert mp.rejected == [4] and 4 not in mp.used
+    assert np.allclose(mp.position, pos, atol=1e-6)
+    assert mp.residuals[4] > 10
+
+
+def test_rendered_grid_views_give_submillimetre_positions():
+    g = GridMap(6, 6, 0.1, 0.05)
+    det = MarkerDetector("DICT_4X4_50")
+    rng = np.random.default_rng(5)
+    errs = []
+    for _ in range(6):
+        v = random_map_view(rng, g, K, (320, 240), "DICT_4X4_50", background="gravel", blur_sigma=0.5, noise_sigma=1.5)
+        mp = estimate_camera_pose(det.detect(v.render.image), g, CAM)
+        errs.append(np.linalg.norm(mp.position - v.position))
+        cov = mp.pose.covariance
+        assert cov is not None and np.allclose(cov, cov.T)
+    assert np.median(errs) < 0.001, errs
+
+
+def test_nothing_seen_and_bad_arguments():
+    g = GridMap(2, 2, 0.1, 0.05)
+    assert estimate_camera_pose([], g, CAM) is None
+    assert estimate_camera_pose([MarkerDetection(77, np.zeros((4, 2)))], g, CAM) is None
+    with pytest.raises(TypeError, match="marker_map"):
+        estimate_camera_pose([], {}, CAM)
+    with pytest.raises(TypeError, match="camera"):
+        estimate_camera_pose([], g, K)

@@ -1,0 +1,204 @@
+"""Camera pose from every visible marker of a map at once (report §3.2.2, "Aruco marker grid").
+
+Report §3.2.2: "Once the markers are detected, the two dimensional marker corner locations
+(image-points) are known, and the corresponding three dimensional (real-world points)
+locations can be looked up in the on-board map. Then, a Gauss-Newton iteration optimization
+method is used to find the parameterized projective map, describing the bottom camera location
+in the scene ... The parameters ... correspond directly to the states [x y z phi theta psi]."
+
+The start is the best single-marker pose (the marker whose own pose reprojects all map corners
+best); Gauss-Newton / Levenberg-Marquardt then fits all corners jointly; markers whose corners
+disagree with the rest are dropped and the fit repeated.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from visloc.pose.camera import Camera
+from visloc.pose.gauss_newton import refine_params, residuals_and_jacobian
+from visloc.pose.maps import MarkerMap
+from visloc.pose.marker_pose import MIN_PIXEL_SIGMA, estimate_marker_pose
+from visloc.pose.rotations import euler_to_matrix, matrix_to_euler
+from visloc.types import MarkerDetection, Pose
+
+__all__ = ["MapPose", "estimate_camera_pose"]
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True, eq=False)
+class MapPose:
+    """The camera's pose in a marker map.
+
+    Attributes
+    ----------
+    pose : Pose
+        ``T_cam_map``: ``p_cam = R @ p_map + t``, with ``covariance`` of its ``params``
+        and ``reprojection_rms`` over the corners used.
+    used : list of int
+        Ids of the markers in the final fit.
+    rejected : list of int
+        Map markers seen but dropped as inconsistent with the rest.
+    unknown : list of int
+        Ids seen that are not in the map (ignored).
+    residuals : dict of int -> float
+        RMS reprojection error (px) of each marker seen in the map under the final pose.
+    """
+
+    pose: Pose
+    used: list[int]
+    rejected: list[int]
+    unknown: list[int]
+    residuals: dict[int, float]
+
+    @property
+    def position(self) -> FloatArray:
+        """Camera centre in the map frame, m: ``-R^T t``."""
+        return -self.pose.R.T @ self.pose.t
+
+    @property
+    def R_map_cam(self) -> FloatArray:
+        """Camera axes in the map frame (3, 3)."""
+        return self.pose.R.T
+
+    @property
+    def state(self) -> FloatArray:
+        """The report's state ``[x, y, z, phi, theta, psi]`` of the camera in the map:
+        its centre and the Z-Y-X Euler angles of ``R_map_cam`` (``Rz(psi) Ry(theta) Rx(phi)``)."""
+        return np.concatenate([self.position, matrix_to_euler(self.R_map_cam)])
+
+    def to_dict(self) -> dict:
+        """JSON-ready summary."""
+        return {"position": [float(v) for v in self.position], "state": [float(v) for v in self.state],
+                "rms_px": float(self.pose.reprojection_rms), "used": self.used, "rejected": self.rejected,
+                "unknown": self.unknown}
+
+
+def _params_of(R: FloatArray, t: FloatArray) -> FloatArray:
+    return np.concatenate([t, matrix_to_euler(R)])
+
+
+def estimate_camera_pose(
+    detections: list[MarkerDetection],
+    marker_map: MarkerMap,
+    camera: Camera,
+    *,
+    pixel_sigma: float | None = None,
+    max_residual: float = 3.0,
+    max_iter: int = 30,
+    n_starts: int = 2,
+) -> MapPose | None:
+    """Pose of the camera in ``marker_map`` from the markers detected in one image.
+
+    Parameters
+    ----------
+    detections : list of MarkerDetection
+        Markers found in the image (ids not in the map are ignored and listed).
+    marker_map : MarkerMap
+    camera : Camera
+    pixel_sigma : float, optional
+        Corner noise (px) for the covariance; default estimated from the residuals.
+    max_residual : float
+        A marker whose RMS reprojection error exceeds this many px and three times the
+        median marker's is dropped, and the fit repeated.
+    max_iter : int
+        Most Gauss-Newton iterations per fit.
+    n_starts : int
+        How many of the largest markers' own poses (and their flipped solutions) are tried
+        as the start.
+
+    Returns
+    -------
+    MapPose or None
+        None when no marker of the map was seen.
+    """
+    if not isinstance(marker_map, MarkerMap):
+        raise TypeError(f"marker_map must be a MarkerMap, got {type(marker_map).__name__}")
+    if not isinstance(camera, Camera):
+        raise TypeError(f"camera must be a Camera, got {type(camera).__name__}")
+    known = [d for d in detections if d.id in marker_map]
+    unknown = sorted({int(d.id) for d in detections if d.id not in marker_map})
+    if not known:
+        return None
+    ids = [int(d.id) for d in known]
+    obj = np.stack([marker_map.corners_of(i) for i in ids])  # (M, 4, 3)
+    xy = np.stack([camera.normalize(d.corners) for d in known])  # (M, 4, 2)
+    f = np.array([[camera.fx], [camera.fy]])
+    # start: the own poses (and their flips) of the largest markers in the image, moved into the
+    # map frame; the one that reprojects all map corners best
+    area = [abs(_area(d.corners)) for d in known]
+    starts = []
+    for j in np.argsort(area)[::-1][:n_starts]:
+        i, d = ids[j], known[j]
+        L = float(np.linalg.norm(marker_map.corners_of(i)[1] - marker_map.corners_of(i)[0]))
+        try:
+            T_cam_marker = estimate_marker_pose(d.corners, L, camera)
+        except ValueError:
+            continue
+        T_map_marker_inv = marker_map.marker_pose(i).inverse()
+        for cand in (T_cam_marker, T_cam_marker.alternative):
+            if cand is not None:
+                T_cam_map = cand.compose(T_map_marker_inv)
+                starts.append(_params_of(T_cam_map.R, T_cam_map.t))
+    if not starts:
+        return None
+    fit = [float(np.mean(_marker_rms(s, obj, xy, f) ** 2)) for s in starts]
+    keep = np.ones(len(ids), bool)
+    rejected: list[int] = []
+    params = np.array(starts[int(np.argmin(fit))])[None]
+    while True:
+        X = obj[keep].reshape(-1, 3)
+        p, sse = refine_params(params, X, xy[keep].reshape(-1, 2), fx=camera.fx, fy=camera.fy, max_iter=max_iter)
+        p = np.atleast_2d(p)
+        best = p[int(np.argmin(np.atleast_1d(sse)))]
+        res = _marker_rms(best, obj, xy, f)
+        used_res = res[keep]
+        limit = max(max_residual, 3.0 * float(np.median(used_res)))
+        worst = int(np.argmax(np.where(keep, res, -1.0)))
+        if keep.sum() <= 1 or res[worst] <= limit:
+            break
+        keep[worst] = False
+        rejected.append(ids[worst])
+        params = best[None]
+    X = obj[keep].reshape(-1, 3)
+    E = residuals_and_jacobian(best[None], X.T, xy[keep].reshape(-1, 2).T, f)[0]
+    M = E.T @ E
+    n = 2 * X.shape[0]
+    rms = float(np.sqrt(M[6, 6] / n))
+    cov = _covariance(M, n, pixel_sigma)
+    R = euler_to_matrix(best[3:])
+    pose = Pose(R, best[:3].copy(), rms, cov)
+    return MapPose(pose, [i for i, k in zip(ids, keep, strict=True) if k], rejected, unknown,
+                   {i: float(r) for i, r in zip(ids, res, strict=True)})
+
+
+def _area(corners: FloatArray) -> float:
+    (x0, y0), (x1, y1), (x2, y2), (x3, y3) = corners.tolist()
+    return 0.5 * ((x0 - x2) * (y1 - y3) - (x1 - x3) * (y0 - y2))  # half the diagonals' cross
+
+
+def _marker_rms(params: FloatArray, obj: FloatArray, xy: FloatArray, f: FloatArray) -> FloatArray:
+    """RMS reprojection error (px) of each marker's four corners under ``params``."""
+    R = euler_to_matrix(params[3:])
+    q = obj @ R.T + params[:3]  # (M, 4, 3)
+    z = np.where(q[..., 2] > 1e-9, q[..., 2], np.nan)
+    uv = q[..., :2] / z[..., None]
+    d = (uv - xy) * f[:, 0]
+    rms = np.sqrt(np.mean((d * d).sum(axis=-1), axis=-1))
+    return np.where(np.isfinite(rms), rms, np.inf)
+
+
+def _covariance(M: FloatArray, n_residuals: int, pixel_sigma: float | None) -> FloatArray | None:
+    """``sigma^2 (J^T J)^-1`` from ``M = [J | r]^T [J | r]`` (7, 7)."""
+    dof = max(n_residuals - 6, 1)
+    var = float(pixel_sigma) ** 2 if pixel_sigma is not None else max(M[6, 6] / dof, MIN_PIXEL_SIGMA**2)
+    try:
+        inv = np.linalg.inv(M[:6, :6])
+    except np.linalg.LinAlgError:
+        return None
+    cov = var * 0.5 * (inv + inv.T)
+    return cov if np.isfinite(cov).all() and (np.diag(cov) > 0).all() else None

@@ -1,0 +1,191 @@
+"""Marker maps: marker id -> the 3-D corners of that marker in a map (world) frame.
+
+Corners are in OpenCV order: the marker's own top-left, top-right, bottom-right, bottom-left.
+A map is saved as OpenCV FileStorage YAML::
+
+    %YAML:1.0
+    markers:
+       - { id: 0, corners: [ x0, y0, z0, x1, y1, z1, x2, y2, z2, x3, y3, z3 ] }
+       ...
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from visloc.types import Pose
+
+__all__ = ["GridMap", "MarkerMap"]
+
+FloatArray = NDArray[np.float64]
+
+
+def _marker_frame(corners: FloatArray) -> tuple[Pose, float]:
+    """The marker's own frame in the map (origin at the centre, x right, y up, z out of the
+    face) as ``T_map_marker``, and its side length; checks the corners form a square."""
+    c = corners
+    side = np.linalg.norm(np.roll(c, -1, axis=0) - c, axis=1)
+    diag = np.linalg.norm(c[[2, 3]] - c[[0, 1]], axis=1)
+    L = float(side.mean())
+    if L <= 0 or np.abs(side - L).max() > 1e-3 * L + 1e-9 or np.abs(diag - L * np.sqrt(2)).max() > 1e-3 * L + 1e-9:
+        raise ValueError("not a square")
+    x = c[1] - c[0]
+    y = c[0] - c[3]
+    z = np.cross(x, y)
+    R = np.stack([x / np.linalg.norm(x), y / np.linalg.norm(y), z / np.linalg.norm(z)], axis=1)
+    u, _, vt = np.linalg.svd(R)  # nearest rotation (the square is not exactly orthogonal)
+    R = u @ vt
+    if np.linalg.det(R) < 0 or np.abs(c.mean(axis=0) @ R[:, 2] - c @ R[:, 2]).max() > 1e-3 * L + 1e-9:
+        raise ValueError("not planar")
+    return Pose(R, c.mean(axis=0)), L
+
+
+@dataclass(frozen=True, eq=False)
+class MarkerMap:
+    """Markers at known places: id -> (4, 3) corners in the map frame.
+
+    Parameters
+    ----------
+    corners : dict of int -> array_like (4, 3)
+        Each marker's corners in OpenCV order (its own top-left, top-right, bottom-right,
+        bottom-left), metres. They must form a planar square.
+
+    Raises
+    ------
+    ValueError
+        Duplicate ids (when built from a list), corners that are not finite, not (4, 3),
+        not a square or not planar.
+    """
+
+    corners: dict[int, FloatArray]
+    _frames: dict[int, Pose] = field(default_factory=dict, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        clean: dict[int, FloatArray] = {}
+        for k, v in dict(self.corners).items():
+            arr = np.asarray(v, dtype=np.float64)
+            if arr.shape != (4, 3) or not np.isfinite(arr).all():
+                raise ValueError(f"marker {k}: corners must be finite (4, 3), got shape {arr.shape}")
+            try:
+                frame, _ = _marker_frame(arr)
+            except ValueError as exc:
+                raise ValueError(f"marker {k}: its corners are {exc} (within 0.1 % of the side)") from None
+            clean[int(k)] = arr
+            self._frames[int(k)] = frame
+        object.__setattr__(self, "corners", clean)
+
+    @classmethod
+    def from_list(cls, markers: list[tuple[int, ArrayLike]]) -> MarkerMap:
+        """A map from ``[(id, corners (4, 3)), ...]``; duplicate ids raise ValueError."""
+        ids = [int(i) for i, _ in markers]
+        dup = sorted({i for i in ids if ids.count(i) > 1})
+        if dup:
+            raise ValueError(f"duplicate marker ids in the map: {dup}")
+        return cls({int(i): c for i, c in markers})
+
+    @property
+    def ids(self) -> NDArray[np.int64]:
+        """Marker ids, sorted."""
+        return np.array(sorted(self.corners), dtype=np.int64)
+
+    def __contains__(self, marker_id: object) -> bool:
+        return marker_id in self.corners
+
+    def __len__(self) -> int:
+        return len(self.corners)
+
+    def corners_of(self, marker_id: int) -> FloatArray:
+        """(4, 3) corners of ``marker_id`` in the map frame; KeyError if it is not in the map."""
+        return self.corners[int(marker_id)]
+
+    def marker_pose(self, marker_id: int) -> Pose:
+        """``T_map_marker``: the marker's own frame (centre, x right, y up, z out) in the map."""
+        return self._frames[int(marker_id)]
+
+    def to_file(self, path: str | Path) -> None:
+        """Save as OpenCV FileStorage YAML (see the module docstring)."""
+        lines = ["%YAML:1.0", "markers:"]
+        for i in self.ids:
+            nums = ", ".join(repr(float(v)) for v in self.corners[int(i)].ravel())
+            lines.append(f"   - {{ id: {int(i)}, corners: [ {nums} ] }}")
+        try:
+            Path(path).write_text("\n".join(lines) + "\n")
+        except OSError as exc:
+            raise OSError(f"cannot write marker map {path}: {exc.strerror}") from None
+
+    @classmethod
+    def from_file(cls, path: str | Path) -> MarkerMap:
+        """Load a map saved by :meth:`to_file` (or written by hand in that format).
+
+        Raises
+        ------
+        ValueError
+            A missing or unreadable file, no ``markers`` list, an entry without ``id`` and 12
+            corner numbers, duplicate ids, or corners that are not a planar square.
+        """
+        p = Path(path)
+        if not p.is_file():
+            raise ValueError(f"marker map {p} does not exist")
+        try:
+            fs = cv2.FileStorage(str(p), cv2.FILE_STORAGE_READ)
+        except (cv2.error, SystemError):  # the binding wraps parse errors in SystemError
+            raise ValueError(f"marker map {p} is not OpenCV FileStorage YAML") from None
+        try:
+            node = fs.getNode("markers")
+            if node.empty() or not node.isSeq():
+                raise ValueError(f"marker map {p} has no 'markers' list")
+            items = []
+            for k in range(node.size()):
+                entry = node.at(k)
+                mid, cn = entry.getNode("id"), entry.getNode("corners")
+                if mid.empty() or cn.empty():
+                    raise ValueError(f"marker map {p}: entry {k} needs 'id' and 'corners'")
+                vals = cn.mat() if cn.isMap() else np.array([cn.at(j).real() for j in range(cn.size())])
+                if vals is None or np.size(vals) != 12:
+                    raise ValueError(f"marker map {p}: entry {k} must have 12 corner numbers")
+                items.append((int(mid.real()), np.asarray(vals, float).reshape(4, 3)))
+        finally:
+            fs.release()
+        return cls.from_list(items)
+
+
+def GridMap(rows: int, cols: int, marker_length: float, spacing: float, first_id: int = 0) -> MarkerMap:
+    """A ``rows x cols`` grid of square markers in the map's z = 0 plane.
+
+    Ids run row by row from ``first_id`` (left to right, top to bottom). The map frame has its
+    origin at the top-left corner of the first marker, x to the right along a row, y up (so
+    the rows lie at negative y) and z out of the printed face, like a marker's own frame.
+    Marker (r, c) has its top-left corner at ``(c (L + s), -r (L + s), 0)``.
+
+    Parameters
+    ----------
+    rows, cols : int
+        Grid size (>= 1).
+    marker_length : float
+        Side of each marker's black square, m (> 0).
+    spacing : float
+        Gap between neighbouring markers, m (>= 0).
+    first_id : int
+        Id of the top-left marker (>= 0).
+    """
+    for name, v in (("rows", rows), ("cols", cols)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+            raise ValueError(f"{name} must be an integer >= 1, got {v!r}")
+    if not (0 < float(marker_length) < float("inf")):
+        raise ValueError(f"marker_length must be positive and finite, got {marker_length!r}")
+    if not (0 <= float(spacing) < float("inf")):
+        raise ValueError(f"spacing must be >= 0 and finite, got {spacing!r}")
+    if int(first_id) < 0:
+        raise ValueError(f"first_id must be >= 0, got {first_id!r}")
+    L, pitch = float(marker_length), float(marker_length) + float(spacing)
+    square = np.array([[0, 0, 0], [L, 0, 0], [L, -L, 0], [0, -L, 0]], dtype=np.float64)
+    markers = {}
+    for r in range(rows):
+        for c in range(cols):
+            markers[int(first_id) + r * cols + c] = square + (c * pitch, -r * pitch, 0.0)
+    return MarkerMap(markers)

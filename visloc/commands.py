@@ -218,7 +218,7 @@ def _demo_flow(out: Path) -> bool:
 def _render_flow(args: argparse.Namespace) -> int:
     from visloc.synth.flight import render_flight, write_flight
 
-    n = round(args.seconds * args.fps) + 1
+    n = max(1, round(args.seconds * args.fps))
     with tqdm(total=n, unit="frame", disable=None, file=sys.stderr) as bar:
         flight = render_flight(args.seconds, args.fps, size=args.size, seed=args.seed, texture=args.texture,
                                progress=lambda k: bar.update(1))

@@ -19,6 +19,7 @@ from visloc.synth.flight import (
     straight_track,
     write_flight,
 )
+from visloc.synth.imu import ImuStream, imu_stream
 from visloc.synth.markers import (
     MarkerRender,
     RenderedMarker,
@@ -36,10 +37,12 @@ __all__ = [
     "TEXTURES",
     "Flight",
     "FlightTrack",
+    "ImuStream",
     "MarkerRender",
     "RenderedMarker",
     "default_camera",
     "flight_trajectory",
+    "imu_stream",
     "marker_object_points",
     "polygon_coverage",
     "project_points",

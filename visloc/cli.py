@@ -94,6 +94,11 @@ def build_parser() -> argparse.ArgumentParser:
     rm.add_argument("--dict", default="DICT_4X4_50", metavar="NAME|FILE", help="dictionary")
     rm.add_argument("--difficulty", default="easy", choices=["easy", "hard", "small", "empty"])
     rm.add_argument("--video", action="store_true", help="write markers.mp4 of a moving camera instead")
+    rp = rs.add_parser("map", help="a printable image of a marker map (its z = 0 plane)")
+    rp.add_argument("map", help="marker map (OpenCV YAML)")
+    rp.add_argument("output", help="output image (.png)")
+    rp.add_argument("--dict", default="DICT_4X4_50", metavar="NAME|FILE", help="marker dictionary")
+    rp.add_argument("--dpi", type=_positive, default=300.0, help="dots per inch (default 300)")
     rf = rs.add_parser("flow", help="a downward camera's flight over ground + ground_truth.csv")
     rf.add_argument("outdir", help="output folder")
     rf.add_argument("--seconds", type=_positive, default=10.0, help="duration (default 10 s)")
@@ -117,6 +122,21 @@ def build_parser() -> argparse.ArgumentParser:
     fl.add_argument("--max-frames", type=_count, metavar="N", help="stop after N frames")
     fl.add_argument("--quiet", action="store_true", help="no progress bar or summary")
 
+    tk = sub.add_parser("track", help="a body's markers relative to reference markers, seen by a fixed camera")
+    tk.add_argument("source", help="image, folder, glob pattern, video file or camera index")
+    tk.add_argument("--camera", required=True, metavar="FILE", help="camera file (OpenCV YAML)")
+    tk.add_argument("--body", required=True, metavar="BODY.yml", help="marker map of the tracked body")
+    tk.add_argument("--reference", required=True, metavar="REF.yml", help="marker map of the reference")
+    tk.add_argument("--dict", default="DICT_4X4_50", metavar="NAME|FILE", help="marker dictionary")
+    tk.add_argument("--out", metavar="FILE.jsonl", help="write one JSON pose per frame")
+    tk.add_argument("--udp", nargs="?", const="127.0.0.1:5005", metavar="HOST:PORT",
+                    help="also send each JSON pose as a UDP datagram (default 127.0.0.1:5005)")
+    tk.add_argument("--fps", type=_positive, help="frame rate for image lists")
+    tk.add_argument("--poles", type=float, nargs=2, default=(-4.0, -4.0), metavar="P",
+                    help="velocity observer poles, 1/s (report eq. 3.14; default -4 -4)")
+    tk.add_argument("--max-frames", type=_count, metavar="N", help="stop after N frames")
+    tk.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+
     m = sub.add_parser("demo", help="render a few frames, detect markers and poses, print a table")
     m.add_argument("--out", default="visloc-demo", metavar="DIR", help="output folder (default ./visloc-demo)")
     m.add_argument("--frames", type=_count, default=6, help="number of frames (default 6)")
@@ -136,7 +156,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from visloc import commands  # imported late: `visloc --help` stays fast
 
     run = {"detect": commands.detect, "render": commands.render, "demo": commands.demo,
-           "flow": commands.flow}[args.command]
+           "flow": commands.flow, "track": commands.track}[args.command]
     try:
         return run(args)
     except KeyboardInterrupt:

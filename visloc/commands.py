@@ -119,6 +119,8 @@ def render(args: argparse.Namespace) -> int:
     """``visloc render markers|flow``: a synthetic dataset with ground truth."""
     if args.what == "flow":
         return _render_flow(args)
+    if args.what == "map":
+        return _render_map(args)
     from visloc.synth import render_dataset, render_video
 
     out = Path(args.outdir)
@@ -321,4 +323,114 @@ def flow(args: argparse.Namespace) -> int:
         ms = f", median {1e3 * float(np.median(times)):.2f} ms per pair" if times else ""
         q = f", median quality {float(np.median(qualities)):.2f}" if qualities else ""
         print(f"visloc flow: {n_frames} frames, {failed} unreadable{ms}{q}", file=sys.stderr)
+    return 1 if failed else 0
+
+
+def _render_map(args: argparse.Namespace) -> int:
+    """``visloc render map``: the markers of a map drawn to scale in its z = 0 plane."""
+    import cv2
+
+    from visloc.markers.dictionary import load_dictionary
+    from visloc.pose.maps import MarkerMap
+
+    mmap = MarkerMap.from_file(args.map)
+    dic = load_dictionary(args.dict)
+    pts = np.concatenate([mmap.corners_of(int(i)) for i in mmap.ids])
+    if np.abs(pts[:, 2]).max() > 1e-6:
+        raise UsageError(f"map {args.map} has markers off the z = 0 plane: it cannot be printed as one sheet")
+    bad = [int(i) for i in mmap.ids if i >= len(dic)]
+    if bad:
+        raise UsageError(f"map ids {bad} are not in dictionary {args.dict} ({len(dic)} markers)")
+    px_per_m = args.dpi / 0.0254
+    margin = 0.02  # m of white around the outermost markers
+    lo = pts[:, :2].min(axis=0) - margin
+    hi = pts[:, :2].max(axis=0) + margin
+    w, h = (int(np.ceil(v)) for v in (hi - lo) * px_per_m)
+    canvas = np.full((h, w), 255, np.uint8)
+    cells = dic.marker_size + 2
+    for i in mmap.ids:
+        c = mmap.corners_of(int(i))[:, :2]
+        img_pts = np.stack([(c[:, 0] - lo[0]) * px_per_m, (hi[1] - c[:, 1]) * px_per_m], axis=1)  # y up -> down
+        cell_px = max(1, round(float(np.linalg.norm(img_pts[1] - img_pts[0])) / cells))
+        marker = dic.marker_image(int(i), cell_px=cell_px)
+        s = marker.shape[0]
+        src = np.float32([[-0.5, -0.5], [s - 0.5, -0.5], [s - 0.5, s - 0.5]])
+        M = cv2.getAffineTransform(src, np.float32(img_pts[:3] - 0.5))  # canvas pixel centres at integers
+        mask = cv2.warpAffine(np.full_like(marker, 255), M, (w, h), flags=cv2.INTER_NEAREST)
+        warped = cv2.warpAffine(marker, M, (w, h), flags=cv2.INTER_NEAREST)
+        canvas[mask > 0] = warped[mask > 0]
+    if not cv2.imwrite(args.output, canvas):
+        raise OSError(f"cannot write {args.output}")
+    print(f"visloc render: wrote {args.output} ({w} x {h} px at {args.dpi:g} dpi, {len(mmap)} markers)")
+    return 0
+
+
+def track(args: argparse.Namespace) -> int:
+    """``visloc track``: pose of a body relative to reference markers, per frame, with an
+    observer velocity (report eq. 3.14), as JSON lines and optionally UDP datagrams."""
+    import json
+    import socket
+
+    from visloc.estimation import LuenbergerObserver
+    from visloc.pose.maps import MarkerMap
+    from visloc.pose.relative import track_body
+
+    detector = MarkerDetector(args.dict)
+    camera = Camera.from_file(args.camera)
+    body = MarkerMap.from_file(args.body)
+    reference = MarkerMap.from_file(args.reference)
+    target = None
+    if args.udp:
+        host, _, port = args.udp.rpartition(":")
+        if not host or not port.isdigit() or not 0 < int(port) < 65536:
+            raise UsageError(f"--udp must be HOST:PORT, got {args.udp!r}")
+        target = (host, int(port))
+    failed = n_frames = lost = 0
+    observer = None
+    last_time = None
+    with ExitStack() as stack:
+        source = stack.enter_context(open_source(args.source, fps=args.fps))
+        out = stack.enter_context(JsonlWriter(args.out)) if args.out else None
+        sock = stack.enter_context(socket.socket(socket.AF_INET, socket.SOCK_DGRAM)) if target else None
+        try:
+            total = len(source)
+        except TypeError:
+            total = None
+        for frame in tqdm(source, total=total, unit="frame", disable=True if args.quiet else None, file=sys.stderr):
+            if args.max_frames and n_frames >= args.max_frames:
+                break
+            n_frames += 1
+            rec: dict = {"frame": frame.index, "source": frame.name, "time": frame.time}
+            if frame.image is None:
+                failed += 1
+                _warn("track", frame.error or f"cannot read {frame.name}")
+                rec["error"] = frame.error
+            else:
+                cam = _camera_for(camera, frame.image.shape, [True])
+                bp = track_body(detector.detect(frame.image), body, reference, cam)
+                dt = None if last_time is None else frame.time - last_time
+                if dt is not None and not dt > 0:
+                    raise UsageError(f"frame times must increase; {frame.name} is at {frame.time} s")
+                if bp is None:
+                    lost += 1
+                    rec["lost"] = True
+                    if observer is not None and dt is not None:
+                        p, v = observer.update(None, dt)
+                        rec |= {"predicted_x": float(p[0]), "predicted_y": float(p[1]),
+                                "vx": float(v[0]), "vy": float(v[1])}
+                else:
+                    rec |= bp.to_dict()
+                    if observer is None:
+                        observer = LuenbergerObserver(args.poles, 1.0 / 30.0, initial_position=bp.position[:2])
+                        rec |= {"vx": 0.0, "vy": 0.0}
+                    else:
+                        _, v = observer.update(bp.position[:2], dt)
+                        rec |= {"vx": float(v[0]), "vy": float(v[1])}
+                last_time = frame.time
+            if out:
+                out.write(rec)
+            if sock is not None:
+                sock.sendto(json.dumps(rec).encode(), target)
+    if not args.quiet:
+        print(f"visloc track: {n_frames} frames, {lost} without both maps, {failed} unreadable", file=sys.stderr)
     return 1 if failed else 0

@@ -1,0 +1,61 @@
+"""``visloc track`` and ``visloc render map`` through ``main([...])``."""
+
+import json
+import socket
+
+import cv2
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from tests.pose.test_relative import BODY, REFERENCE, SIZE, two_map_scene
+from visloc.cli import main
+from visloc.markers import MarkerDetector
+from visloc.pose.maps import MarkerMap
+from visloc.synth import default_camera, write_camera_yml
+from visloc.types import Pose
+
+
+def test_track_writes_poses_and_sends_udp(tmp_path):
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    truth = []
+    for k in range(4):  # the body moves 2 cm along x per frame, turning slowly
+        T = Pose(Rotation.from_euler("z", 10 + 2 * k, degrees=True).as_matrix(), np.array([0.5 + 0.02 * k, -0.3, 0.6]))
+        cv2.imwrite(str(frames / f"f{k}.png"), two_map_scene(T, seed=k).image)
+        truth.append(T)
+    BODY.to_file(tmp_path / "body.yml")
+    REFERENCE.to_file(tmp_path / "ref.yml")
+    write_camera_yml(tmp_path / "cam.yml", default_camera(SIZE), SIZE)
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", 0))
+    rx.settimeout(2.0)
+    port = rx.getsockname()[1]
+    out = tmp_path / "track.jsonl"
+    code = main(["track", str(frames), "--camera", str(tmp_path / "cam.yml"), "--body", str(tmp_path / "body.yml"),
+                 "--reference", str(tmp_path / "ref.yml"), "--fps", "30", "--out", str(out), "--udp", f"127.0.0.1:{port}",
+                 "--quiet"])
+    assert code == 0
+    recs = [json.loads(x) for x in out.read_text().splitlines()]
+    assert len(recs) == 4
+    for rec, T in zip(recs, truth, strict=True):
+        assert abs(rec["x"] - T.t[0]) < 0.01 and abs(rec["y"] - T.t[1]) < 0.01
+        assert abs(np.degrees(rec["yaw"]) - np.degrees(Rotation.from_matrix(T.R).as_euler("zyx")[0])) < 0.5
+    vx = [r["vx"] for r in recs]  # moving +x at 0.6 m/s: the observer (poles -4) converges towards it
+    assert 0 < vx[1] < vx[2] < vx[3] < 0.6
+    got = [json.loads(rx.recv(65536)) for _ in range(4)]
+    rx.close()
+    assert [g["frame"] for g in got] == [0, 1, 2, 3]
+
+
+def test_render_map_makes_a_detectable_sheet(tmp_path):
+    REFERENCE.to_file(tmp_path / "ref.yml")
+    assert main(["render", "map", str(tmp_path / "ref.yml"), str(tmp_path / "sheet.png"), "--dpi", "150"]) == 0
+    img = cv2.imread(str(tmp_path / "sheet.png"), cv2.IMREAD_GRAYSCALE)
+    px_per_m = 150 / 0.0254
+    assert abs(img.shape[1] - (0.28 + 0.04) * px_per_m) < 2  # 2 x 12 cm + 4 cm gap + 2 x 2 cm margin
+    dets = MarkerDetector("DICT_4X4_50").detect(cv2.copyMakeBorder(img, 20, 20, 20, 20, cv2.BORDER_CONSTANT, value=255))
+    assert sorted(d.id for d in dets) == [0, 1, 2, 3]
+    # marker 0's top-left corner at the sheet's margin: 2 cm in from the top-left corner
+    d0 = next(d for d in dets if d.id == 0)
+    assert np.allclose(d0.corners[0] - 20, 0.02 * px_per_m - 0.5, atol=1.0)
+    assert isinstance(MarkerMap.from_file(tmp_path / "ref.yml"), MarkerMap)

@@ -12,7 +12,7 @@ from visloc.pose.maps import MarkerMap
 from visloc.synth.markers import MarkerRender, render_markers
 from visloc.types import Pose
 
-__all__ = ["MapView", "random_map_view", "render_map_view"]
+__all__ = ["MapFlight", "MapView", "random_map_view", "render_map_flight", "render_map_view"]
 
 #: Camera axes of a camera looking straight down at the map (z = up) with yaw 0:
 #: image x along map +x, image y along map -y, optical axis along map -z.
@@ -68,3 +68,50 @@ def random_map_view(rng: np.random.Generator, marker_map: MarkerMap, K: NDArray,
     R_map_cam = R_tilt @ Rotation.from_euler("z", yaw).as_matrix() @ LOOKING_DOWN
     T_cam_map = Pose(R_map_cam.T, -R_map_cam.T @ pos)
     return render_map_view(marker_map, K, size, T_cam_map, dictionary, rng=rng, **render_options)
+
+
+@dataclass(frozen=True, eq=False)
+class MapFlight:
+    """A downward camera's flight over a marker map on the ground, with exact truth.
+
+    Attributes
+    ----------
+    frames : ndarray (N, H, W) uint8
+    track : visloc.synth.flight.FlightTrack
+        Truth; ``position`` is the camera centre in the map frame (z = height).
+    K : ndarray (3, 3)
+    marker_map : MarkerMap
+    """
+
+    frames: NDArray[np.uint8]
+    track: object
+    K: NDArray[np.float64]
+    marker_map: MarkerMap
+
+
+def render_map_flight(seconds: float, fps: float, marker_map: MarkerMap, *, size: tuple[int, int] = (320, 240),
+                      seed: int = 1, dictionary: str = "DICT_4X4_50", max_speed: float = 0.4,
+                      height: tuple[float, float] = (0.8, 1.3), roll_pitch: float = 0.1,
+                      **render_options: object) -> MapFlight:
+    """Fly the bottom camera (AR.Drone 2.0 intrinsics scaled to ``size``) over ``marker_map``
+    (lying in the ground plane, z up): a smooth random trajectory from
+    :func:`visloc.synth.flight.flight_trajectory`, centred over the map, rendered frame by
+    frame with exact marker ground truth."""
+    from dataclasses import replace
+
+    from visloc.synth.flight import default_bottom_camera, flight_trajectory
+
+    track = flight_trajectory(seed, seconds, fps, max_speed=max_speed, height=height, roll_pitch=roll_pitch)
+    pts = np.concatenate([marker_map.corners_of(int(i)) for i in marker_map.ids])
+    shift = pts[:, :2].mean(axis=0) - track.position[:, :2].mean(axis=0)
+    position = track.position + np.array([shift[0], shift[1], 0.0])
+    track = replace(track, position=position)
+    K = default_bottom_camera(size)
+    rng = np.random.default_rng([seed, 3])
+    frames = np.empty((len(track.t), size[1], size[0]), np.uint8)
+    for k in range(len(track.t)):
+        R_world_cam, C = track.pose(k)
+        T_cam_map = Pose(R_world_cam.T, -R_world_cam.T @ C)
+        view = render_map_view(marker_map, K, size, T_cam_map, dictionary, rng=rng, **render_options)
+        frames[k] = view.render.image
+    return MapFlight(frames, track, K, marker_map)

@@ -99,6 +99,11 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("output", help="output image (.png)")
     rp.add_argument("--dict", default="DICT_4X4_50", metavar="NAME|FILE", help="marker dictionary")
     rp.add_argument("--dpi", type=_positive, default=300.0, help="dots per inch (default 300)")
+    rl = rs.add_parser("localize", help="a downward camera flying over a marker grid + ground truth")
+    rl.add_argument("outdir", help="output folder")
+    rl.add_argument("--seconds", type=_positive, default=5.0, help="duration (default 5 s)")
+    rl.add_argument("--fps", type=_positive, default=30.0, help="frame rate (default 30)")
+    rl.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
     rf = rs.add_parser("flow", help="a downward camera's flight over ground + ground_truth.csv")
     rf.add_argument("outdir", help="output folder")
     rf.add_argument("--seconds", type=_positive, default=10.0, help="duration (default 10 s)")
@@ -121,6 +126,20 @@ def build_parser() -> argparse.ArgumentParser:
     fl.add_argument("--rerun", metavar="FILE.rrd", help="write a rerun recording")
     fl.add_argument("--max-frames", type=_count, metavar="N", help="stop after N frames")
     fl.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+
+    lz = sub.add_parser("localize", help="camera position and velocity over a marker map (pose + Kalman filter)")
+    lz.add_argument("source", help="image, folder, glob pattern, video file or camera index")
+    lz.add_argument("--camera", required=True, metavar="FILE", help="camera file (OpenCV YAML)")
+    lz.add_argument("--map", required=True, metavar="MAP.yml", help="marker map (OpenCV YAML)")
+    lz.add_argument("--dict", default="DICT_4X4_50", metavar="NAME|FILE", help="marker dictionary")
+    lz.add_argument("--fps", type=_positive, help="frame rate (required for image folders)")
+    lz.add_argument("--accel-noise", type=_positive, default=2.0, metavar="A",
+                    help="Kalman process noise: white acceleration std, m/s^2 (default 2)")
+    lz.add_argument("--truth", metavar="FILE.csv", help="ground truth (t,x,y,z columns) to compare with")
+    lz.add_argument("--out", metavar="FILE.csv", help="write one row per frame")
+    lz.add_argument("--rerun", metavar="FILE.rrd", help="write a rerun recording (estimate vs truth)")
+    lz.add_argument("--max-frames", type=_count, metavar="N", help="stop after N frames")
+    lz.add_argument("--quiet", action="store_true", help="no progress bar or summary")
 
     tk = sub.add_parser("track", help="a body's markers relative to reference markers, seen by a fixed camera")
     tk.add_argument("source", help="image, folder, glob pattern, video file or camera index")
@@ -156,7 +175,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from visloc import commands  # imported late: `visloc --help` stays fast
 
     run = {"detect": commands.detect, "render": commands.render, "demo": commands.demo,
-           "flow": commands.flow, "track": commands.track}[args.command]
+           "flow": commands.flow, "track": commands.track, "localize": commands.localize}[args.command]
     try:
         return run(args)
     except KeyboardInterrupt:

@@ -121,6 +121,8 @@ def render(args: argparse.Namespace) -> int:
         return _render_flow(args)
     if args.what == "map":
         return _render_map(args)
+    if args.what == "localize":
+        return _render_localize(args)
     from visloc.synth import render_dataset, render_video
 
     out = Path(args.outdir)
@@ -187,8 +189,38 @@ def demo(args: argparse.Namespace) -> int:
         print(f"\n{len(found)} markers found, {missed} missed; median corner error {med:.3f} px "
               f"against the exact ground truth.")
     flow_ok = _demo_flow(out)
+    loc_ok = _demo_localize()
     print(f"Outputs in {out.resolve()}: frames/, annotated/, detections.jsonl, flow.csv")
-    return 0 if found and not missed and flow_ok else 1
+    return 0 if found and not missed and flow_ok and loc_ok else 1
+
+
+def _demo_localize() -> bool:
+    """The localisation part of the demo: 1 s over a marker grid, pose + Kalman filter."""
+    from visloc.estimation.kalman import PositionVelocityKF
+    from visloc.pose.map_pose import estimate_camera_pose
+    from visloc.pose.maps import GridMap
+    from visloc.synth.grid import render_map_flight
+
+    grid = GridMap(**LOCALIZE_GRID)
+    flight = render_map_flight(1.0, 30.0, grid, seed=4, dictionary="DICT_4X4_100", background="gravel",
+                               blur_sigma=0.5, noise_sigma=1.0)
+    camera = Camera(flight.K, size=(320, 240))
+    detector = MarkerDetector("DICT_4X4_100")
+    kf = PositionVelocityKF(3, model="cv", accel_noise=2.0)
+    tr = flight.track
+    pos_err, vel_err = [], []
+    for k, img in enumerate(flight.frames):
+        mp = estimate_camera_pose(detector.detect(img), grid, camera)
+        kf.predict(float(tr.t[k]))
+        if mp is not None:
+            kf.update_position(mp.position, std=0.002)
+            pos_err.append(np.linalg.norm(mp.position - tr.position[k]))
+        if k >= 5:
+            vel_err.append(np.linalg.norm(kf.velocity - tr.velocity[k]))
+    print(f"Localisation over a 10 x 10 marker grid ({len(tr.t)} frames, 320x240, 1 s, height "
+          f"{tr.position[:, 2].mean():.2f} m): {len(pos_err)} poses, median position error "
+          f"{1e3 * np.median(pos_err):.2f} mm; Kalman velocity error median {1e3 * np.median(vel_err):.0f} mm/s.")
+    return len(pos_err) == len(tr.t) and bool(np.median(pos_err) < 0.005)
 
 
 def _demo_flow(out: Path) -> bool:
@@ -433,4 +465,110 @@ def track(args: argparse.Namespace) -> int:
                 sock.sendto(json.dumps(rec).encode(), target)
     if not args.quiet:
         print(f"visloc track: {n_frames} frames, {lost} without both maps, {failed} unreadable", file=sys.stderr)
+    return 1 if failed else 0
+
+
+LOCALIZE_GRID = {"rows": 10, "cols": 10, "marker_length": 0.10, "spacing": 0.05}
+LOCALIZE_COLUMNS = ["frame", "time", "source", "x", "y", "z", "vx", "vy", "vz", "std_x", "std_y", "std_z",
+                    "markers", "fix", "error_m"]
+
+
+def _render_localize(args: argparse.Namespace) -> int:
+    import cv2
+
+    from visloc.pose.maps import GridMap
+    from visloc.synth import write_camera_yml
+    from visloc.synth.grid import render_map_flight
+
+    grid = GridMap(**LOCALIZE_GRID)
+    flight = render_map_flight(args.seconds, args.fps, grid, seed=args.seed, dictionary="DICT_4X4_100",
+                               background="gravel", blur_sigma=0.5, noise_sigma=1.0)
+    out = Path(args.outdir)
+    out.mkdir(parents=True, exist_ok=True)
+    for k, img in enumerate(flight.frames):
+        if not cv2.imwrite(str(out / f"frame_{k:05d}.png"), img):
+            raise OSError(f"cannot write {out / f'frame_{k:05d}.png'}")
+    tr = flight.track
+    rows = np.column_stack([np.arange(len(tr.t)), tr.t, tr.position, tr.velocity, tr.yaw, tr.roll, tr.pitch])
+    np.savetxt(out / "ground_truth.csv", rows, delimiter=",", comments="",
+               header="frame,t,x,y,z,vx,vy,vz,yaw,roll,pitch", fmt=["%d"] + ["%.10g"] * (rows.shape[1] - 1))
+    grid.to_file(out / "map.yml")
+    write_camera_yml(out / "camera.yml", flight.K, (flight.frames.shape[2], flight.frames.shape[1]))
+    print(f"visloc render: wrote {len(tr.t)} frames, map.yml (DICT_4X4_100), camera.yml and ground_truth.csv to {out}")
+    return 0
+
+
+def _read_truth(path: str) -> dict[str, np.ndarray]:
+    try:
+        data = np.genfromtxt(path, delimiter=",", names=True)
+    except (OSError, ValueError) as exc:
+        raise UsageError(f"cannot read --truth {path}: {exc}") from None
+    if data.dtype.names is None or not {"t", "x", "y", "z"} <= set(data.dtype.names):
+        raise UsageError(f"--truth {path} needs a header with t, x, y and z columns")
+    return {k: np.atleast_1d(data[k]) for k in ("t", "x", "y", "z")}
+
+
+def localize(args: argparse.Namespace) -> int:
+    """``visloc localize``: the camera's position over a marker map per frame, filtered by a
+    constant-velocity Kalman filter (filterpy) into position and velocity with uncertainty."""
+    from visloc.estimation.kalman import PositionVelocityKF
+    from visloc.io import CsvWriter, ImageListSource
+    from visloc.pose.map_pose import estimate_camera_pose
+    from visloc.pose.maps import MarkerMap
+
+    detector = MarkerDetector(args.dict)
+    camera = Camera.from_file(args.camera)
+    mmap = MarkerMap.from_file(args.map)
+    truth = _read_truth(args.truth) if args.truth else None
+    kf = PositionVelocityKF(3, model="cv", accel_noise=args.accel_noise)
+    failed = n_frames = fixes = 0
+    errors: list[float] = []
+    with ExitStack() as stack:
+        source = stack.enter_context(open_source(args.source, fps=args.fps))
+        if isinstance(source, ImageListSource) and args.fps is None:
+            raise UsageError("image folders and globs need --fps (the time between frames)")
+        out = stack.enter_context(CsvWriter(args.out, LOCALIZE_COLUMNS)) if args.out else None
+        rec = stack.enter_context(RerunLogger(args.rerun)) if args.rerun else None
+        try:
+            total = len(source)
+        except TypeError:
+            total = None
+        for frame in tqdm(source, total=total, unit="frame", disable=True if args.quiet else None, file=sys.stderr):
+            if args.max_frames and n_frames >= args.max_frames:
+                break
+            n_frames += 1
+            row: dict = {"frame": frame.index, "time": frame.time, "source": frame.name}
+            if frame.image is None:
+                failed += 1
+                _warn("localize", frame.error or f"cannot read {frame.name}")
+                if out:
+                    out.write(row | {"fix": "unreadable"})
+                continue
+            cam = _camera_for(camera, frame.image.shape, [True])
+            mp = estimate_camera_pose(detector.detect(frame.image), mmap, cam)
+            kf.predict(frame.time)
+            fix = "none"
+            if mp is not None:
+                # corner noise seen from the camera's distance: rms px x distance / focal length
+                dist = float(np.linalg.norm(mp.pose.t))
+                std = max(0.002, 2.0 * max(mp.pose.reprojection_rms, 0.05) * dist / cam.fx)
+                fix = "used" if kf.update_position(mp.position, std=std) else "rejected"
+                fixes += fix == "used"
+            pos, vel = kf.position, kf.velocity
+            sd = np.sqrt(np.clip(np.diag(kf.P)[:: kf.order], 0, None)) if kf.P is not None else np.full(3, np.nan)
+            row |= {"x": pos[0], "y": pos[1], "z": pos[2], "vx": vel[0], "vy": vel[1], "vz": vel[2],
+                    "std_x": sd[0], "std_y": sd[1], "std_z": sd[2],
+                    "markers": len(mp.used) if mp is not None else 0, "fix": fix}
+            true_pos = None
+            if truth is not None:
+                true_pos = np.array([np.interp(frame.time, truth["t"], truth[k]) for k in ("x", "y", "z")])
+                row["error_m"] = float(np.linalg.norm(pos - true_pos))
+                errors.append(row["error_m"])
+            if out:
+                out.write(row)
+            if rec:
+                rec.log_localize(frame.index, frame.time, frame.image, pos, true_pos)
+    if not args.quiet:
+        err = f", median position error {1e3 * float(np.median(errors)):.1f} mm" if errors else ""
+        print(f"visloc localize: {n_frames} frames, {fixes} position fixes, {failed} unreadable{err}", file=sys.stderr)
     return 1 if failed else 0

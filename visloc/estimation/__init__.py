@@ -12,7 +12,9 @@ Height (report §3.2.1): :func:`ultrasound_height` (eq. 3.13) and its forward mo
 
 Position/velocity (report eq. 3.14): :func:`luenberger_gains` by pole placement (Ackermann's
 formula, :func:`ackermann_observer_gain`, so repeated poles work) and the streaming two-axis
-:class:`LuenbergerObserver`.
+:class:`LuenbergerObserver`; :class:`PositionVelocityKF`, a Kalman filter (filterpy inside) fusing
+position fixes, flow velocities and an accelerometer input, with chi-square gating and RTS
+smoothing.
 """
 
 from visloc.estimation.attitude import (
@@ -24,6 +26,7 @@ from visloc.estimation.attitude import (
     wrap_angle,
 )
 from visloc.estimation.height import HeightEstimate, ultrasound_height, ultrasound_reading
+from visloc.estimation.kalman import PositionVelocityKF
 from visloc.estimation.observer import (
     LuenbergerObserver,
     ackermann_observer_gain,
@@ -37,6 +40,7 @@ __all__ = [
     "GyroIntegrator",
     "HeightEstimate",
     "LuenbergerObserver",
+    "PositionVelocityKF",
     "SwitchingFilter",
     "accel_tilt",
     "ackermann_observer_gain",

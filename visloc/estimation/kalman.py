@@ -195,9 +195,9 @@ class PositionVelocityKF:
             raise ValueError(f"{name} must be finite, got {v.tolist()}")
         return v.copy()
 
-    def _record(self, step: tuple[FloatArray, FloatArray, FloatArray] | None) -> None:
+    def _record(self, t: float, step: tuple[FloatArray, FloatArray, FloatArray] | None) -> None:
         if self.keep_history:
-            self._ts.append(float(self.t))  # type: ignore[arg-type]
+            self._ts.append(t)
             self._xs.append(self.x)
             self._Ps.append(self.P)
             self._steps.append(step)
@@ -242,12 +242,19 @@ class PositionVelocityKF:
         return [(t, x.copy(), p.copy()) for t, x, p in zip(self._ts, self._xs, self._Ps)]
 
     # ----------------------------------------------------------------------------- predict
-    def transition(self, dt: float) -> tuple[FloatArray, FloatArray]:
-        """``F`` and ``Q`` (dim_x, dim_x) of a step of ``dt`` seconds (>= 0) with ``accel_noise``."""
+    def transition(self, dt: float,
+                   accel_std: float | None = None) -> tuple[FloatArray, FloatArray]:
+        """``F`` and ``Q`` (dim_x, dim_x) of a step of ``dt`` seconds (>= 0).
+
+        ``Q = Q_discrete_white_noise(order, dt, accel_std^2, block_size=dims)`` in filterpy's
+        ``order_by_dim`` layout, which is the layout of ``x``; ``accel_std`` defaults to
+        ``accel_noise`` (m/s^2).
+        """
         dt = check_real(dt, "dt", nonneg=True)
+        std = (self.accel_noise if accel_std is None
+               else check_real(accel_std, "accel_std", positive=True))
         F = np.kron(np.eye(self.dims), _axis_F(self.order, dt))
-        Q = Q_discrete_white_noise(dim=self.order, dt=dt, var=self.accel_noise**2,
-                                   block_size=self.dims)  # order_by_dim: matches x
+        Q = Q_discrete_white_noise(dim=self.order, dt=dt, var=std**2, block_size=self.dims)
         return F, Q
 
     def predict(self, t: float, accel: object = None, *, accel_std: float | None = None) -> None:
@@ -283,12 +290,10 @@ class PositionVelocityKF:
             if not np.all(np.isfinite(u)):
                 self.skipped["accel_input"] += 1
                 u = None
-        var = self.accel_noise**2
-        if u is not None and accel_std is not None:
-            var = check_real(accel_std, "accel_std", positive=True) ** 2
+        std = None if accel_std is None else check_real(accel_std, "accel_std", positive=True)
         if self.t is None:
             self.t = t
-            self._record(None)
+            self._record(t, None)
             return
         if t < self.t:
             raise ValueError(f"out-of-order timestamp: t={t!r} is earlier than the last time "
@@ -296,8 +301,7 @@ class PositionVelocityKF:
         dt = t - self.t
         if dt == 0.0:
             return
-        F = np.kron(np.eye(self.dims), _axis_F(self.order, dt))
-        Q = Q_discrete_white_noise(dim=self.order, dt=dt, var=var, block_size=self.dims)
+        F, Q = self.transition(dt, std if u is not None else None)
         if u is None:
             self.kf.predict(F=F, Q=Q)  # x = F x; P = F P F^T + Q
         else:
@@ -305,7 +309,7 @@ class PositionVelocityKF:
             self.kf.predict(u=u.reshape(-1, 1), B=B, F=F, Q=Q)  # x = F x + B u
         self.kf.P = 0.5 * (self.kf.P + self.kf.P.T)
         self.t = t
-        self._record((F, self.x, self.P))
+        self._record(t, (F, self.x, self.P))
 
     # ------------------------------------------------------------------------------ update
     def _measurement_cov(self, R: object, std: object, name: str) -> FloatArray | None:
@@ -313,9 +317,8 @@ class PositionVelocityKF:
         if (R is None) == (std is None):
             raise ValueError(f"give exactly one of R and std for the {name} measurement")
         if std is not None:
-            s = np.full(self.dims, np.nan)
-            s[:] = as_float_array(std, "std", ()) if np.ndim(std) == 0 else \
-                as_float_array(std, "std", (self.dims,))
+            shape = () if np.ndim(std) == 0 else (self.dims,)
+            s = np.broadcast_to(as_float_array(std, "std", shape), (self.dims,))
             if not np.all(np.isfinite(s)):
                 return None
             if np.any(s <= 0.0):

@@ -110,6 +110,7 @@ class RerunLogger(Closing):
         self._pinhole: tuple[bytes, tuple[int, int]] | None = None
         self._marker_paths: set[str] = set()
         self._track: list[list[float]] = []
+        self._tracks3d: dict[str, list[list[float]]] = {}
         self._closed = False
 
     @property
@@ -246,6 +247,26 @@ class RerunLogger(Closing):
         if position is not None:
             self._track.append([float(position[0]), float(position[1])])
             rec.log("track/position", rr.LineStrips2D([self._track]))
+
+    def log_localize(self, index: int, time: float, image: NDArray[np.uint8] | None,
+                     estimate: Sequence[float], truth: Sequence[float] | None = None) -> None:
+        """Log one frame of a localisation run: the image, the estimated position (and the
+        true one when known) as scalar plots (``plots/x`` ...), and both tracks in 3-D
+        (``world/estimate``, ``world/truth``)."""
+        rec = self.recording
+        rec.set_time("frame", sequence=int(index))
+        rec.set_time("time", duration=float(time))
+        if image is not None:
+            img = rr.Image(_rgb(image))
+            rec.log("camera/image", img if self.jpeg_quality is None else img.compress(jpeg_quality=int(self.jpeg_quality)))
+        for name, p in (("estimate", estimate), ("truth", truth)):
+            if p is None:
+                continue
+            for axis, v in zip("xyz", p, strict=False):
+                rec.log(f"plots/{axis}/{name}", rr.Scalars(float(v)))
+            track = self._tracks3d.setdefault(name, [])
+            track.append([float(v) for v in p])
+            rec.log(f"world/{name}", rr.LineStrips3D([track]))
 
     @staticmethod
     def _corners(det: MarkerDetection, i: int) -> NDArray[np.float64]:

@@ -1,0 +1,38 @@
+"""``visloc render localize`` and ``visloc localize`` through ``main([...])``."""
+
+import csv
+
+import numpy as np
+
+from visloc.cli import main
+
+
+def test_localize_a_rendered_flight(tmp_path, capsys):
+    assert main(["render", "localize", str(tmp_path), "--seconds", "0.5", "--fps", "30", "--seed", "2"]) == 0
+    out = tmp_path / "est.csv"
+    code = main(["localize", str(tmp_path), "--camera", str(tmp_path / "camera.yml"), "--map", str(tmp_path / "map.yml"),
+                 "--dict", "DICT_4X4_100", "--fps", "30", "--truth", str(tmp_path / "ground_truth.csv"),
+                 "--out", str(out), "--rerun", str(tmp_path / "l.rrd")])
+    assert code == 0
+    with open(out, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    gt = np.genfromtxt(tmp_path / "ground_truth.csv", delimiter=",", names=True)
+    assert len(rows) == len(gt) and all(r["fix"] == "used" for r in rows)
+    err = np.array([float(r["error_m"]) for r in rows])
+    assert np.median(err) < 0.002  # 2 mm
+    v = np.array([[float(r["vx"]), float(r["vy"])] for r in rows[5:]])
+    true_v = np.stack([gt["vx"][5:], gt["vy"][5:]], axis=1)
+    assert np.median(np.linalg.norm(v - true_v, axis=1)) < 0.05
+    assert "median position error" in capsys.readouterr().err
+    assert (tmp_path / "l.rrd").stat().st_size > 0
+
+
+def test_localize_needs_fps_for_folders_and_a_valid_map(tmp_path, capsys):
+    assert main(["render", "localize", str(tmp_path), "--seconds", "0.1", "--fps", "30"]) == 0
+    code = main(["localize", str(tmp_path), "--camera", str(tmp_path / "camera.yml"), "--map", str(tmp_path / "map.yml")])
+    assert code == 2 and "--fps" in capsys.readouterr().err
+    (tmp_path / "bad.yml").write_text("%YAML:1.0\nmarkers: 3\n")
+    code = main(["localize", str(tmp_path), "--camera", str(tmp_path / "camera.yml"), "--map", str(tmp_path / "bad.yml"),
+                 "--fps", "30"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and "markers" in err

@@ -47,7 +47,8 @@ def noisy_fixes(pos, seed, missing=0.1, std=POS_STD):
 
 def run(t, fixes, *, kf=None, vel_meas=None, vel_std=0.05, accel=None, accel_std=None, **kw):
     """Run a filter over the samples; returns the filter and its (N, 2) positions, velocities."""
-    kf = kf or PositionVelocityKF(2, accel_noise=kw.pop("accel_noise", 1.0), **kw)
+    kf = kf or PositionVelocityKF(2, accel_noise=kw.pop("accel_noise", 1.0),
+                                  accel_noise_kind="density", **kw)
     p_est, v_est = np.zeros((len(t), 2)), np.zeros((len(t), 2))
     for k, tk in enumerate(t):
         kf.predict(tk, None if accel is None else accel[k], accel_std=accel_std)
@@ -90,7 +91,7 @@ def test_velocity_beats_differencing(track):
     assert rms(p_est[SETTLE:] - pos[SETTLE:]) < POS_STD
 
 
-def simulate_model(kf_model, rng, n_steps, accel_noise, r_cov):
+def simulate_model(kf_model, kind, rng, n_steps, accel_noise, r_cov):
     """Truth drawn from the filter's own model on jittered 30 Hz steps: times, states (n, dim_x)
     in the filter's order, and fixes (some missing)."""
     order = 2 if kf_model == "cv" else 3
@@ -102,7 +103,7 @@ def simulate_model(kf_model, rng, n_steps, accel_noise, r_cov):
     if order == 3:
         x0[2::order] = rng.normal(0.0, 0.5, 2)
     x[0] = x0
-    helper = PositionVelocityKF(2, model=kf_model, accel_noise=accel_noise)
+    helper = PositionVelocityKF(2, model=kf_model, accel_noise=accel_noise, accel_noise_kind=kind)
     for k in range(1, n_steps):
         F, Q = helper.transition(t[k] - t[k - 1])
         x[k] = F @ x[k - 1] + rng.multivariate_normal(np.zeros(2 * order), Q)
@@ -113,16 +114,17 @@ def simulate_model(kf_model, rng, n_steps, accel_noise, r_cov):
     return t, x, [None if d else zi for zi, d in zip(z, drop)]
 
 
-@pytest.mark.parametrize("model", ["cv", "ca"])
-def test_nees_consistent(model):
+@pytest.mark.parametrize(("model", "kind"), [("cv", "std"), ("cv", "density"), ("ca", "density")])
+def test_nees_consistent(model, kind):
     n_runs, n_steps, accel_noise = 50, 150, 0.5
     r_cov = POS_STD**2 * np.array([[1.0, 0.3], [0.3, 1.0]])
     rng = np.random.default_rng(42)
     nees = np.zeros((n_runs, n_steps))
     dim_x = 0
     for i in range(n_runs):
-        t, x, fixes = simulate_model(model, rng, n_steps, accel_noise, r_cov)
-        kf = PositionVelocityKF(2, model=model, accel_noise=accel_noise, initial_std=0.5)
+        t, x, fixes = simulate_model(model, kind, rng, n_steps, accel_noise, r_cov)
+        kf = PositionVelocityKF(2, model=model, accel_noise=accel_noise, accel_noise_kind=kind,
+                                initial_std=0.5)
         dim_x = kf.dim_x
         for k in range(n_steps):
             kf.predict(t[k])
@@ -146,7 +148,7 @@ def test_outliers_rejected_and_track_unaffected(track):
     for i in idx:
         direction = rng.normal(size=2)
         bad[i] = fixes[i] + direction / np.linalg.norm(direction)  # 1 m off
-    kf = PositionVelocityKF(2, accel_noise=1.0)
+    kf = PositionVelocityKF(2, accel_noise=1.0, accel_noise_kind="density")
     used = []
     for k, tk in enumerate(t):
         kf.predict(tk)
@@ -157,7 +159,7 @@ def test_outliers_rejected_and_track_unaffected(track):
     # the same as if those samples had been missing
     missing = [None if k in idx else z for k, z in enumerate(fixes)]
     _, p_ref, v_ref = run(t, missing)
-    ref = PositionVelocityKF(2, accel_noise=1.0)
+    ref = PositionVelocityKF(2, accel_noise=1.0, accel_noise_kind="density")
     _, p_out, v_out = run(t, bad, kf=ref)
     np.testing.assert_allclose(p_out, p_ref, atol=1e-12)
     np.testing.assert_allclose(v_out, v_ref, atol=1e-12)
@@ -171,8 +173,8 @@ def test_gap_grows_covariance_and_recovers(track):
     t, pos, vel, _, fixes = track
     gap = range(240, 270)  # 1 s without fixes
     fixes = [None if k in gap else z for k, z in enumerate(fixes)]
-    kf = PositionVelocityKF(2, accel_noise=1.0)
-    traces, errors = [], []
+    kf = PositionVelocityKF(2, accel_noise=1.0, accel_noise_kind="density")
+    traces, errors, v_err = [], [], []
     for k, tk in enumerate(t):
         kf.predict(tk)
         if fixes[k] is not None:
@@ -180,11 +182,14 @@ def test_gap_grows_covariance_and_recovers(track):
             assert accepted or k != gap.stop, "first fix after the gap rejected"
         traces.append(np.trace(kf.P))
         errors.append(np.linalg.norm(kf.position - pos[k]))
+        v_err.append(kf.velocity - vel[k])
     in_gap = np.array(traces[gap.start - 1:gap.stop])
     assert np.all(np.diff(in_gap) > 0), "P must grow while predicting only"
     assert in_gap[-1] > 20 * in_gap[0]
     after = slice(gap.stop + 30, gap.stop + 90)
     assert max(errors[after]) < 4 * POS_STD, f"not recovered: {max(errors[after]):.3f} m"
+    v_after, v_before = rms(v_err[after]), rms(v_err[SETTLE:gap.start])
+    assert v_after < 1.5 * v_before, f"velocity RMS {v_after:.3f} after, {v_before:.3f} before"
     assert kf.rejected["position"] == 0
 
 
@@ -263,12 +268,13 @@ def test_persistent_jump_resets():
     kf, p_est, _ = run(t, jumped, reset_after=5)
     assert kf.resets == 1 and kf.rejected["position"] == 5
     assert np.max(np.abs(p_est[-30:] - pos[-30:] - (1.0, 0.0))) < 0.05
-    kf, _, _ = run(t, jumped, reset_after=None)
-    assert kf.resets == 0 and kf.rejected["position"] == len(t) - 90
+    kf, _, _ = run(t, jumped, reset_after=None)  # only the growing P opens the gate, much later
+    assert kf.resets == 0 and kf.rejected["position"] > 30
 
 
 def test_constant_acceleration_model_and_3d():
-    kf = PositionVelocityKF(3, model="ca", accel_noise=0.1, initial_std=(1.0, 1.0, 2.0))
+    kf = PositionVelocityKF(3, model="ca", accel_noise=0.1, accel_noise_kind="density",
+                            initial_std=(1.0, 1.0, 2.0))
     assert kf.dim_x == 9
     a = np.array([0.5, -0.2, 0.1])
     rng = np.random.default_rng(0)
@@ -280,13 +286,30 @@ def test_constant_acceleration_model_and_3d():
     np.testing.assert_allclose(kf.acceleration, a, atol=0.05)
     np.testing.assert_allclose(kf.velocity, a * 149 / RATE, atol=0.05)
     F, Q = kf.transition(0.1)
-    block = Q_discrete_white_noise(3, dt=0.1, var=0.01)
+    block = Q_discrete_white_noise(3, dt=0.1, var=0.1**2 * 0.1)  # jerk density: q^2 dt
     np.testing.assert_allclose(Q[3:6, 3:6], block)  # per-axis blocks: [p, v, a] of y
+    assert np.count_nonzero(Q) == 27
     np.testing.assert_allclose(F[0, :3], [1.0, 0.1, 0.005])
+    per_step = PositionVelocityKF(3, model="ca", accel_noise=0.1)  # default kind "std"
+    _, Q = per_step.transition(0.1)
+    np.testing.assert_allclose(Q, Q_discrete_white_noise(3, dt=0.1, var=0.01, block_size=3))
+    _, Q = PositionVelocityKF(2, accel_noise=2.0, accel_noise_kind="density").transition(0.05)
+    np.testing.assert_allclose(Q, Q_discrete_white_noise(2, dt=0.05, var=4.0 / 0.05, block_size=2))
     with pytest.raises(ValueError, match="accel"):
         kf.predict(10.0, accel=(0.0, 0.0, 0.0))
     with pytest.raises(AttributeError):
         _ = PositionVelocityKF(2).acceleration
+
+
+def test_density_noise_is_rate_independent():
+    one, many = (PositionVelocityKF(2, initial_position=(0.0, 0.0), accel_noise_kind="density")
+                 for _ in range(2))
+    one.predict(0.0)
+    one.predict(1.0)
+    for k in range(31):
+        many.predict(k / 30)
+    np.testing.assert_allclose(one.P[1, 1], many.P[1, 1])  # velocity: 1 + q^2 * 1 s
+    assert 0.8 < one.P[0, 0] / many.P[0, 0] < 1.2
 
 
 @pytest.mark.parametrize(("kwargs", "exc", "match"), [
@@ -294,6 +317,7 @@ def test_constant_acceleration_model_and_3d():
     ({"dims": 2.0}, TypeError, "dims"),
     ({"model": "cj"}, ValueError, "model"),
     ({"accel_noise": -1.0}, ValueError, "accel_noise"),
+    ({"accel_noise_kind": "psd"}, ValueError, "accel_noise_kind"),
     ({"gate": 1.5}, ValueError, "gate"),
     ({"reset_after": 0}, ValueError, "reset_after"),
     ({"initial_position": (0.0, 0.0, 0.0)}, ValueError, "initial_position"),

@@ -22,17 +22,30 @@ are block diagonal with one block per axis. With ``dt`` the time since the previ
                   [0,  1]]                      [0,  1, dt    ],
                                                 [0,  0, 1     ]]
 
-Process noise (filterpy's discrete white-noise models, Bar-Shalom p. 274): for ``"cv"`` the
-acceleration is piecewise constant over each step, white between steps, with standard deviation
-``accel_noise`` (m/s^2), ``Q_axis = G G^T accel_noise^2``, ``G = [dt^2/2, dt]``; for ``"ca"`` the
-acceleration changes by a white increment of standard deviation ``accel_noise`` (m/s^2) per step,
-``G = [dt^2/2, dt, 1]``. The noise is defined per step, so call :meth:`PositionVelocityKF.predict`
-at every sample time (also when the measurement is missing) rather than once over a long gap.
+Process noise: filterpy's discrete white-noise models (Bar-Shalom p. 274),
+``Q_axis = G G^T var`` with ``G = [dt^2/2, dt]`` (``"cv"``: the acceleration is constant over a
+step and white between steps) or ``G = [dt^2/2, dt, 1]`` (``"ca"``: the acceleration changes by a
+white increment each step). ``accel_noise`` sets ``var`` in one of two ways
+(``accel_noise_kind``):
+
+- ``"std"`` (default): ``var = accel_noise^2`` per step, m/s^2 (filterpy's ``var`` as is): the
+  standard deviation of the piecewise-constant acceleration (``"cv"``) or of its change per step
+  (``"ca"``). This noise is defined per step, so the tuning depends on the sample rate: call
+  :meth:`PositionVelocityKF.predict` at every sample time, also when the measurement is missing.
+- ``"density"``: the spectral density of the white noise driving the highest
+  derivative, m/s^2/sqrt(Hz) for ``"cv"`` (white acceleration) and m/s^3/sqrt(Hz) for ``"ca"``
+  (white jerk). ``var`` is scaled with ``dt`` so that the highest derivative diffuses by
+  ``accel_noise^2 dt`` per step (``var = accel_noise^2 / dt`` for ``"cv"``,
+  ``accel_noise^2 dt`` for ``"ca"``): the tuning does not depend on the sample rate, and one long
+  predict over a gap grows ``P`` almost as much as many short ones. At a fixed rate ``1/dt``,
+  density ``q`` is the same as ``"std"`` with ``q / sqrt(dt)`` (``"cv"``) or ``q sqrt(dt)``
+  (``"ca"``).
 
 Accelerometer input (``"cv"`` only): ``x = F x + B u`` with ``B_axis = [dt^2/2, dt]`` and ``u`` the
 world-frame acceleration in the state's axes (rotate the specific force into the world frame and
-remove gravity first). ``accel_std`` of that step then replaces ``accel_noise`` in ``Q``: the noise
-is the accelerometer's error instead of the unknown manoeuvre.
+remove gravity first). With an input, the step's ``Q`` uses ``var = accel_std^2`` instead, the
+per-sample variance of the accelerometer's error (a piecewise-constant white acceleration error),
+in place of the unknown manoeuvre.
 
 Measurements are gated: an innovation ``y = z - H x`` with ``S = H P H^T + R`` is rejected when its
 squared Mahalanobis distance ``y^T S^-1 y`` exceeds the ``gate`` quantile of the chi-square
@@ -76,8 +89,14 @@ class PositionVelocityKF:
         Constant velocity (state ``[p, v]`` per axis, ``dim_x = 2 dims``) or constant acceleration
         (``[p, v, a]`` per axis, ``dim_x = 3 dims``); ordering in the module docstring.
     accel_noise : float
-        Process noise, m/s^2, > 0: for ``"cv"`` the standard deviation of the acceleration held
-        constant over each step; for ``"ca"`` that of the acceleration's change per step.
+        Process noise, > 0, in the units of ``accel_noise_kind`` (module docstring): by default
+        the standard deviation (m/s^2) of the acceleration held constant over each step
+        (``"cv"``) or of the acceleration's change per step (``"ca"``).
+    accel_noise_kind : {"std", "density"}
+        ``"std"``: ``accel_noise`` is filterpy's per-step standard deviation (m/s^2),
+        ``var = accel_noise^2``; ``"density"``: it is the spectral density of the white
+        acceleration (``"cv"``, m/s^2/sqrt(Hz)) or jerk (``"ca"``, m/s^3/sqrt(Hz)), independent
+        of the sample rate.
     initial_position : array_like (dims,), optional
         Initial position, m. By default unknown (zero with ``UNKNOWN_POSITION_STD``), so the first
         position measurement sets it.
@@ -116,7 +135,8 @@ class PositionVelocityKF:
     """
 
     def __init__(self, dims: int = 2, *, model: str = "cv", accel_noise: float = 1.0,
-                 initial_position: object = None, initial_velocity: object = None,
+                 accel_noise_kind: str = "std", initial_position: object = None,
+                 initial_velocity: object = None,
                  initial_std: float | Sequence[float] = 1.0, gate: float | None = 0.999,
                  reset_after: int | None = 10, keep_history: bool = True) -> None:
         if not isinstance(dims, int) or isinstance(dims, bool):
@@ -130,13 +150,17 @@ class PositionVelocityKF:
         self.order = 2 if model == "cv" else 3
         self.dim_x = self.order * dims
         self.accel_noise = check_real(accel_noise, "accel_noise", positive=True)
-        if gate is None:
-            self.gate = None
-        else:
-            g = check_real(gate, "gate")
-            if not 0.0 < g < 1.0:
-                raise ValueError(f"gate must be a probability in (0, 1) or None, got {g}")
-            self.gate = g
+        if accel_noise_kind not in ("density", "std"):
+            raise ValueError(f"accel_noise_kind must be 'std' or 'density', got "
+                             f"{accel_noise_kind!r}")
+        self.accel_noise_kind = accel_noise_kind
+        if gate is not None:
+            gate = check_real(gate, "gate")
+            if not 0.0 < gate < 1.0:
+                raise ValueError(f"gate must be a probability in (0, 1) or None, got {gate}")
+        self._gate = gate
+        # every measurement has dims components: one chi-square threshold for all
+        self._gate_d2 = math.inf if gate is None else float(chi2.ppf(gate, dims))
         if reset_after is not None:
             if not isinstance(reset_after, int) or isinstance(reset_after, bool):
                 raise TypeError(f"reset_after must be an int or None, got "
@@ -167,7 +191,7 @@ class PositionVelocityKF:
         self.resets = 0
         self.last_nis = math.nan
         self._consecutive_rejections = 0
-        # per time step: t, posterior x and P, and the step's F, Q, prior x and P (for RTS)
+        # per time step: t, posterior x and P, and (for RTS) the step's F, prior x and prior P
         self._ts: list[float] = []
         self._xs: list[FloatArray] = []
         self._Ps: list[FloatArray] = []
@@ -209,6 +233,16 @@ class PositionVelocityKF:
 
     # ------------------------------------------------------------------------------- state
     @property
+    def gate(self) -> float | None:
+        """Probability of the chi-square gate (None: no gating)."""
+        return self._gate
+
+    @property
+    def gate_threshold(self) -> float:
+        """Squared Mahalanobis distance above which a measurement is rejected (inf: no gate)."""
+        return self._gate_d2
+
+    @property
     def x(self) -> FloatArray:
         """State (dim_x,), ordered per axis ``[p, v(, a)]`` (m, m/s, m/s^2); a copy."""
         return self.kf.x[:, 0].copy()
@@ -246,15 +280,21 @@ class PositionVelocityKF:
                    accel_std: float | None = None) -> tuple[FloatArray, FloatArray]:
         """``F`` and ``Q`` (dim_x, dim_x) of a step of ``dt`` seconds (>= 0).
 
-        ``Q = Q_discrete_white_noise(order, dt, accel_std^2, block_size=dims)`` in filterpy's
-        ``order_by_dim`` layout, which is the layout of ``x``; ``accel_std`` defaults to
-        ``accel_noise`` (m/s^2).
+        ``Q = Q_discrete_white_noise(order, dt, var, block_size=dims)`` in filterpy's
+        ``order_by_dim`` layout, which is the layout of ``x``. ``var`` follows ``accel_noise`` and
+        ``accel_noise_kind``, or is ``accel_std^2`` when ``accel_std`` (m/s^2, per step) is given.
         """
         dt = check_real(dt, "dt", nonneg=True)
-        std = (self.accel_noise if accel_std is None
-               else check_real(accel_std, "accel_std", positive=True))
         F = np.kron(np.eye(self.dims), _axis_F(self.order, dt))
-        Q = Q_discrete_white_noise(dim=self.order, dt=dt, var=std**2, block_size=self.dims)
+        if accel_std is not None:
+            var = check_real(accel_std, "accel_std", positive=True) ** 2
+        elif self.accel_noise_kind == "std":
+            var = self.accel_noise**2
+        elif self.order == 2:
+            var = self.accel_noise**2 / dt if dt > 0.0 else 0.0  # velocity: + q dt per step
+        else:
+            var = self.accel_noise**2 * dt  # acceleration: + q dt per step
+        Q = Q_discrete_white_noise(dim=self.order, dt=dt, var=var, block_size=self.dims)
         return F, Q
 
     def predict(self, t: float, accel: object = None, *, accel_std: float | None = None) -> None:
@@ -271,8 +311,9 @@ class PositionVelocityKF:
             used as the control input ``B u``. Non-finite values drop the input for this step
             (counted in ``skipped["accel_input"]``).
         accel_std : float, optional
-            Standard deviation (m/s^2) of ``accel``'s error; replaces ``accel_noise`` in ``Q`` for
-            this step when the input is used. Default ``accel_noise``.
+            Standard deviation (m/s^2) of ``accel``'s error per sample; when the input is used,
+            ``Q`` of this step is built from it instead of ``accel_noise`` (default: from
+            ``accel_noise`` as without input).
 
         Raises
         ------
@@ -350,7 +391,7 @@ class PositionVelocityKF:
         y = zz - H @ self.kf.x[:, 0]  # innovation y = z - H x
         S = H @ self.kf.P @ H.T + cov  # S = H P H^T + R
         self.last_nis = float(y @ np.linalg.solve(S, y))
-        if self.gate is not None and self.last_nis > chi2.ppf(self.gate, self.dims):
+        if self.last_nis > self._gate_d2:
             if kind != "position":
                 self.rejected[kind] += 1
                 return False

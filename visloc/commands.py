@@ -549,10 +549,10 @@ def localize(args: argparse.Namespace) -> int:
             kf.predict(frame.time)
             fix = "none"
             if mp is not None:
-                # corner noise seen from the camera's distance: rms px x distance / focal length
-                dist = float(np.linalg.norm(mp.pose.t))
-                std = max(0.002, 2.0 * max(mp.pose.reprojection_rms, 0.05) * dist / cam.fx)
-                fix = "used" if kf.update_position(mp.position, std=std) else "rejected"
+                # the pose's own covariance, floored at 1 mm (model errors the corners don't show)
+                cov = mp.position_covariance
+                R = np.eye(3) * 1e-6 if cov is None else cov + np.eye(3) * 1e-6
+                fix = "used" if kf.update_position(mp.position, R=R) else "rejected"
                 fixes += fix == "used"
             pos, vel = kf.position, kf.velocity
             sd = np.sqrt(np.clip(np.diag(kf.P)[:: kf.order], 0, None)) if kf.P is not None else np.full(3, np.nan)

@@ -110,3 +110,25 @@ def test_nothing_seen_and_bad_arguments():
         estimate_camera_pose([], {}, CAM)
     with pytest.raises(TypeError, match="camera"):
         estimate_camera_pose([], g, K)
+
+
+def test_position_covariance_matches_monte_carlo():
+    """The propagated camera-centre covariance predicts the spread of positions from noisy corners."""
+    g = GridMap(3, 3, 0.1, 0.05)
+    R_map_cam = Rotation.from_euler("xyz", [172, 5, 20], degrees=True).as_matrix()
+    pos = np.array([0.2, -0.2, 0.9])
+    R, t = R_map_cam.T, -R_map_cam.T @ pos
+    rng = np.random.default_rng(1)
+    exact = {}
+    for i in g.ids:
+        q = g.corners_of(i) @ R.T + t
+        exact[int(i)] = (q[:, :2] / q[:, 2:]) @ K[:2, :2].T + K[:2, 2]
+    positions, covs = [], []
+    for _ in range(150):
+        dets = [MarkerDetection(i, c + rng.normal(0, 0.3, c.shape)) for i, c in exact.items()]
+        mp = estimate_camera_pose(dets, g, CAM, pixel_sigma=0.3)
+        positions.append(mp.position)
+        covs.append(mp.position_covariance)
+    emp = np.std(positions, axis=0)
+    pred = np.sqrt(np.diag(np.mean(covs, axis=0)))
+    assert np.all(emp / pred > 0.7) and np.all(emp / pred < 1.4), (emp, pred)

@@ -61,6 +61,25 @@ class MapPose:
         return -self.pose.R.T @ self.pose.t
 
     @property
+    def position_covariance(self) -> FloatArray | None:
+        """(3, 3) covariance of :attr:`position`, m^2, propagated from ``pose.covariance``
+        (the parameters ``[tx ty tz phi theta psi]`` of ``T_cam_map``) through
+        ``c = -R(phi, theta, psi)^T t``; None when the pose has no covariance."""
+        cov = self.pose.covariance
+        if cov is None:
+            return None
+        p = self.pose.params
+        J = np.zeros((3, 6))
+        J[:, :3] = -euler_to_matrix(p[3:]).T
+        for k in range(3):  # angles: central differences
+            h = 1e-6
+            dp = np.zeros(3)
+            dp[k] = h
+            J[:, 3 + k] = (-(euler_to_matrix(p[3:] + dp).T @ p[:3]) + euler_to_matrix(p[3:] - dp).T @ p[:3]) / (2 * h)
+        out = J @ cov @ J.T
+        return 0.5 * (out + out.T)
+
+    @property
     def R_map_cam(self) -> FloatArray:
         """Camera axes in the map frame (3, 3)."""
         return self.pose.R.T

@@ -29,6 +29,22 @@ def _warn(command: str, text: str) -> None:
     tqdm.write(f"visloc {command}: warning: {text}", file=sys.stderr)
 
 
+def _frames(source, args: argparse.Namespace):
+    """The frames of an open source with a progress bar (unless ``--quiet``), stopping after
+    ``--max-frames``."""
+    try:
+        total = len(source)
+    except TypeError:
+        total = None
+    if args.max_frames:
+        total = min(total, args.max_frames) if total else args.max_frames
+    bar = tqdm(source, total=total, unit="frame", disable=True if args.quiet else None, file=sys.stderr)
+    for n, frame in enumerate(bar):
+        if args.max_frames and n >= args.max_frames:
+            break
+        yield frame
+
+
 def marker_records(dets: list[MarkerDetection], poses: list[Pose | None] | None) -> list[dict]:
     """JSON records of detections, with pose fields (``rvec``, ``tvec``, ``R``, Euler angles,
     reprojection RMS, ``distance_m``) where a pose is given."""
@@ -69,16 +85,7 @@ def detect(args: argparse.Namespace) -> int:
         sink = stack.enter_context(AnnotationSink(args.annotate)) if args.annotate else None
         rec = stack.enter_context(RerunLogger(args.rerun)) if args.rerun else None
         explain_dir = Path(args.explain) if args.explain else None
-        try:
-            total = len(source)
-        except TypeError:
-            total = None
-        if args.max_frames:
-            total = min(total, args.max_frames) if total else args.max_frames
-        bar = tqdm(source, total=total, unit="frame", disable=True if args.quiet else None, file=sys.stderr)
-        for frame in bar:
-            if args.max_frames and n_frames >= args.max_frames:
-                break
+        for frame in _frames(source, args):
             n_frames += 1
             if frame.image is None:
                 failed += 1
@@ -302,16 +309,9 @@ def flow(args: argparse.Namespace) -> int:
             raise UsageError("image folders and globs need --fps (the time between frames)")
         out = stack.enter_context(CsvWriter(args.out, FLOW_COLUMNS)) if args.out else None
         rec = stack.enter_context(RerunLogger(args.rerun)) if args.rerun else None
-        try:
-            total = len(source)
-        except TypeError:
-            total = None
         ego: EgoMotion | None = None
         last_time = 0.0
-        bar = tqdm(source, total=total, unit="frame", disable=True if args.quiet else None, file=sys.stderr)
-        for frame in bar:
-            if args.max_frames and n_frames >= args.max_frames:
-                break
+        for frame in _frames(source, args):
             n_frames += 1
             row = {"frame": frame.index, "time": frame.time, "source": frame.name}
             if frame.image is None:
@@ -424,13 +424,7 @@ def track(args: argparse.Namespace) -> int:
         source = stack.enter_context(open_source(args.source, fps=args.fps))
         out = stack.enter_context(JsonlWriter(args.out)) if args.out else None
         sock = stack.enter_context(socket.socket(socket.AF_INET, socket.SOCK_DGRAM)) if target else None
-        try:
-            total = len(source)
-        except TypeError:
-            total = None
-        for frame in tqdm(source, total=total, unit="frame", disable=True if args.quiet else None, file=sys.stderr):
-            if args.max_frames and n_frames >= args.max_frames:
-                break
+        for frame in _frames(source, args):
             n_frames += 1
             rec: dict = {"frame": frame.index, "source": frame.name, "time": frame.time}
             if frame.image is None:
@@ -529,13 +523,7 @@ def localize(args: argparse.Namespace) -> int:
             raise UsageError("image folders and globs need --fps (the time between frames)")
         out = stack.enter_context(CsvWriter(args.out, LOCALIZE_COLUMNS)) if args.out else None
         rec = stack.enter_context(RerunLogger(args.rerun)) if args.rerun else None
-        try:
-            total = len(source)
-        except TypeError:
-            total = None
-        for frame in tqdm(source, total=total, unit="frame", disable=True if args.quiet else None, file=sys.stderr):
-            if args.max_frames and n_frames >= args.max_frames:
-                break
+        for frame in _frames(source, args):
             n_frames += 1
             row: dict = {"frame": frame.index, "time": frame.time, "source": frame.name}
             if frame.image is None:

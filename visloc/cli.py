@@ -135,6 +135,7 @@ def build_parser() -> argparse.ArgumentParser:
     lz.add_argument("--fps", type=_positive, help="frame rate (required for image folders)")
     lz.add_argument("--accel-noise", type=_positive, default=2.0, metavar="A",
                     help="Kalman process noise: white acceleration std, m/s^2 (default 2)")
+    lz.add_argument("--imu", metavar="FILE.csv", help="IMU log (t,gx,gy,gz,fx,fy,fz; specific force in camera axes)")
     lz.add_argument("--truth", metavar="FILE.csv", help="ground truth (t,x,y,z columns) to compare with")
     lz.add_argument("--out", metavar="FILE.csv", help="write one row per frame")
     lz.add_argument("--rerun", metavar="FILE.rrd", help="write a rerun recording (estimate vs truth)")

@@ -486,10 +486,28 @@ def _render_localize(args: argparse.Namespace) -> int:
     rows = np.column_stack([np.arange(len(tr.t)), tr.t, tr.position, tr.velocity, tr.yaw, tr.roll, tr.pitch])
     np.savetxt(out / "ground_truth.csv", rows, delimiter=",", comments="",
                header="frame,t,x,y,z,vx,vy,vz,yaw,roll,pitch", fmt=["%d"] + ["%.10g"] * (rows.shape[1] - 1))
+    np.savetxt(out / "imu.csv", flight.imu, delimiter=",", comments="", header="t,gx,gy,gz,fx,fy,fz", fmt="%.10g")
     grid.to_file(out / "map.yml")
     write_camera_yml(out / "camera.yml", flight.K, (flight.frames.shape[2], flight.frames.shape[1]))
-    print(f"visloc render: wrote {len(tr.t)} frames, map.yml (DICT_4X4_100), camera.yml and ground_truth.csv to {out}")
+    print(f"visloc render: wrote {len(tr.t)} frames, map.yml (DICT_4X4_100), camera.yml, imu.csv and "
+          f"ground_truth.csv to {out}")
     return 0
+
+
+def _read_imu(path: str) -> np.ndarray:
+    """(M, 4) ``t, fx, fy, fz`` (specific force in camera axes, m/s^2) from an IMU CSV with
+    columns ``t,gx,gy,gz,fx,fy,fz`` (as ``visloc render localize`` writes), sorted by time."""
+    try:
+        data = np.genfromtxt(path, delimiter=",", names=True)
+    except (OSError, ValueError) as exc:
+        raise UsageError(f"cannot read --imu {path}: {exc}") from None
+    if data.dtype.names is None or not {"t", "fx", "fy", "fz"} <= set(data.dtype.names):
+        raise UsageError(f"--imu {path} needs a header with t, fx, fy and fz columns")
+    imu = np.column_stack([np.atleast_1d(data[k]) for k in ("t", "fx", "fy", "fz")])
+    imu = imu[np.isfinite(imu).all(axis=1)]
+    if len(imu) == 0 or (np.diff(imu[:, 0]) <= 0).any():
+        raise UsageError(f"--imu {path}: times must be finite and increasing")
+    return imu
 
 
 def _read_truth(path: str) -> dict[str, np.ndarray]:
@@ -514,7 +532,11 @@ def localize(args: argparse.Namespace) -> int:
     camera = Camera.from_file(args.camera)
     mmap = MarkerMap.from_file(args.map)
     truth = _read_truth(args.truth) if args.truth else None
+    imu = _read_imu(args.imu) if args.imu else None
     kf = PositionVelocityKF(3, model="cv", accel_noise=args.accel_noise)
+    gravity = np.array([0.0, 0.0, -9.81])  # the map's z axis points up, out of the markers
+    R_map_cam = None
+    last_t = None
     failed = n_frames = fixes = 0
     errors: list[float] = []
     with ExitStack() as stack:
@@ -534,7 +556,16 @@ def localize(args: argparse.Namespace) -> int:
                 continue
             cam = _camera_for(camera, frame.image.shape, [True])
             mp = estimate_camera_pose(detector.detect(frame.image), mmap, cam)
-            kf.predict(frame.time)
+            accel = None
+            if imu is not None and R_map_cam is not None and last_t is not None:
+                # mean specific force over the interval, turned into the map frame: a = R f + g
+                sel = (imu[:, 0] > last_t) & (imu[:, 0] <= frame.time)
+                if sel.any():
+                    accel = R_map_cam @ imu[sel, 1:].mean(axis=0) + gravity
+            kf.predict(frame.time, accel=accel)
+            last_t = frame.time
+            if mp is not None:
+                R_map_cam = mp.R_map_cam
             fix = "none"
             if mp is not None:
                 # the pose's own covariance, floored at 1 mm (model errors the corners don't show)

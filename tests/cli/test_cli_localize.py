@@ -36,3 +36,24 @@ def test_localize_needs_fps_for_folders_and_a_valid_map(tmp_path, capsys):
                  "--fps", "30"])
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and "markers" in err
+
+
+def test_imu_as_control_input_lowers_the_velocity_error(tmp_path):
+    assert main(["render", "localize", str(tmp_path), "--seconds", "1.5", "--fps", "30", "--seed", "5"]) == 0
+    gt = np.genfromtxt(tmp_path / "ground_truth.csv", delimiter=",", names=True)
+    true_v = np.stack([gt["vx"], gt["vy"], gt["vz"]], axis=1)
+
+    def velocity_rms(extra):
+        out = tmp_path / "est.csv"
+        assert main(["localize", str(tmp_path), "--camera", str(tmp_path / "camera.yml"), "--map",
+                     str(tmp_path / "map.yml"), "--dict", "DICT_4X4_100", "--fps", "30", "--out", str(out),
+                     "--quiet", *extra]) == 0
+        with open(out, newline="") as fh:
+            rows = list(csv.DictReader(fh))
+        v = np.array([[float(r[k]) for k in ("vx", "vy", "vz")] for r in rows])
+        p = np.array([[float(r[k]) for k in ("x", "y", "z")] for r in rows])
+        return float(np.sqrt(np.mean(np.sum((v - true_v)[10:] ** 2, axis=1)))), p
+
+    plain, _ = velocity_rms([])
+    fused, _ = velocity_rms(["--imu", str(tmp_path / "imu.csv")])
+    assert fused < 0.8 * plain, (fused, plain)

@@ -81,22 +81,29 @@ class MapFlight:
         Truth; ``position`` is the camera centre in the map frame (z = height).
     K : ndarray (3, 3)
     marker_map : MarkerMap
+    imu : ndarray (M, 7) or None
+        IMU samples ``t, gx, gy, gz, fx, fy, fz`` from the same trajectory, in the *camera*
+        axes: body rates (rad/s) and specific force ``R_world_cam^T (a - g)`` (m/s^2, with
+        ``g = (0, 0, -9.81)`` in the z-up world: at rest looking down it reads (0, 0, -9.81)).
     """
 
     frames: NDArray[np.uint8]
     track: object
     K: NDArray[np.float64]
     marker_map: MarkerMap
+    imu: NDArray[np.float64] | None = None
 
 
 def render_map_flight(seconds: float, fps: float, marker_map: MarkerMap, *, size: tuple[int, int] = (320, 240),
                       seed: int = 1, dictionary: str = "DICT_4X4_50", max_speed: float = 0.4,
                       height: tuple[float, float] = (0.8, 1.3), roll_pitch: float = 0.1,
+                      imu_rate: float | None = 200.0, accel_noise: float = 0.05, gyro_noise: float = 0.005,
                       **render_options: object) -> MapFlight:
     """Fly the bottom camera (AR.Drone 2.0 intrinsics scaled to ``size``) over ``marker_map``
     (lying in the ground plane, z up): a smooth random trajectory from
     :func:`visloc.synth.flight.flight_trajectory`, centred over the map, rendered frame by
-    frame with exact marker ground truth."""
+    frame with exact marker ground truth, and (``imu_rate``) IMU samples of the same flight
+    with white noise."""
     from dataclasses import replace
 
     from visloc.synth.flight import default_bottom_camera, flight_trajectory
@@ -114,4 +121,28 @@ def render_map_flight(seconds: float, fps: float, marker_map: MarkerMap, *, size
         T_cam_map = Pose(R_world_cam.T, -R_world_cam.T @ C)
         view = render_map_view(marker_map, K, size, T_cam_map, dictionary, rng=rng, **render_options)
         frames[k] = view.render.image
-    return MapFlight(frames, track, K, marker_map)
+    imu = None
+    if imu_rate:
+        imu = _imu_samples(seed, seconds, imu_rate, max_speed, height, roll_pitch, accel_noise, gyro_noise)
+    return MapFlight(frames, track, K, marker_map, imu)
+
+
+def _imu_samples(seed, seconds, rate, max_speed, height, roll_pitch, accel_noise, gyro_noise) -> NDArray:
+    """IMU of the same trajectory (it depends on the seed only) sampled at ``rate``: body rates
+    and specific force in camera axes; accelerations by central differences of the analytic
+    velocity (error O(h^2) with h = 1e-4 s)."""
+    from visloc.synth.flight import flight_trajectory
+
+    opts = {"max_speed": max_speed, "height": height, "roll_pitch": roll_pitch}
+    tr = flight_trajectory(seed, seconds, rate, **opts)
+    h = 1e-4
+    up = flight_trajectory(seed, seconds, rate, t0=h, **opts)
+    down = flight_trajectory(seed, seconds, rate, t0=-h, **opts)
+    accel = (up.velocity - down.velocity) / (2 * h)
+    R = tr.R_world_cam  # (M, 3, 3)
+    f = np.einsum("mji,mj->mi", R, accel - np.array([0.0, 0.0, -9.81]))  # R^T (a - g)
+    gyro = np.column_stack([tr.roll_rate, tr.pitch_rate, tr.yaw_rate])
+    rng = np.random.default_rng([seed, 4])
+    f = f + rng.normal(0.0, accel_noise, f.shape)
+    gyro = gyro + rng.normal(0.0, gyro_noise, gyro.shape)
+    return np.column_stack([tr.t, gyro, f])

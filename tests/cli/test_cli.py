@@ -120,3 +120,22 @@ def test_demo_prints_a_table_and_writes_outputs(tmp_path, capsys):
 
 def test_no_command_prints_help():
     assert main([]) == 2
+
+
+def test_an_interrupted_run_keeps_the_frames_already_written(rendered, tmp_path, monkeypatch, capsys):
+    from visloc.markers import MarkerDetector
+
+    calls = {"n": 0}
+    real = MarkerDetector.detect
+
+    def detect_then_interrupt(self, image):
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise KeyboardInterrupt
+        return real(self, image)
+
+    monkeypatch.setattr(MarkerDetector, "detect", detect_then_interrupt)
+    out = tmp_path / "partial.jsonl"
+    assert main(["detect", str(rendered), "--out", str(out), "--quiet"]) == 130
+    assert [r["frame"] for r in _lines(out)] == [0, 1]
+    assert "interrupted" in capsys.readouterr().err

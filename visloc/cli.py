@@ -63,7 +63,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="visloc",
         description="Visual localisation for small drones and robots: square fiducial markers "
-        "(the report's staged detector), Gauss-Newton marker poses, synthetic renders.",
+        "(the report's staged detector) and their poses, camera pose over marker maps, ground "
+        "velocity from a downward camera, state estimation, and synthetic renders with exact truth.",
     )
     parser.add_argument("--version", action="version", version=f"visloc {__version__}")
     parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")

@@ -1,0 +1,173 @@
+"""Rigid-body equations of motion of the quadrotor (report section 2.1, eqs. 2.1-2.8, App. A).
+
+Frames: the inertial frame A is NED (x north, y east, z down; gravity ``+g`` along z) and the
+body frame B is x forward, y right, z down, with its origin at the centre of gravity. The
+attitude is ``lambda = [phi, theta, psi]`` (Z-Y-X Euler angles: roll, pitch, yaw) and
+``R(lambda) = Rz(psi) Ry(theta) Rx(phi)`` maps body-frame vectors into the inertial frame.
+
+State vector (12,), in this order::
+
+    0-2   x, y, z          position of the CoG in A, m            (report xi_A)
+    3-5   u, v, w          velocity of the CoG in A, m/s          (report nu_A; NOT body axes)
+    6-8   phi, theta, psi  Z-Y-X Euler angles, rad                (report lambda)
+    9-11  p, q, r          body angular velocity in B, rad/s      (report omega_x, omega_y, omega_z)
+
+Input ``u = [T, tau_x, tau_y, tau_z]``: total thrust (N) along body -z and body torques (N m).
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from visloc.model.params import ARDrone2Params, check_params
+from visloc.types import FloatArray
+
+STATE_NAMES: tuple[str, ...] = (
+    "x", "y", "z", "u", "v", "w", "phi", "theta", "psi", "p", "q", "r",
+)
+"""Names of the 12 state entries, in order (see the module docstring for frames and units)."""
+
+E3: FloatArray = np.array([0.0, 0.0, 1.0])
+
+
+def _vector(value: ArrayLike, name: str, size: int) -> FloatArray:
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"{name}: expected real numbers, got {type(value).__name__}") from exc
+    if arr.shape != (size,):
+        raise ValueError(f"{name}: expected shape ({size},), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name}: expected finite values, got {arr!r}")
+    return arr
+
+
+def rotation_matrix(lam: ArrayLike) -> FloatArray:
+    """Body-to-inertial rotation ``R = Rz(psi) Ry(theta) Rx(phi)`` (3, 3) (report eqs. 2.5-2.6).
+
+    Parameters
+    ----------
+    lam : array_like (3,)
+        ``[phi, theta, psi]``, rad.
+
+    Returns
+    -------
+    ndarray (3, 3)
+        ``R`` with ``v_A = R @ v_B``.
+    """
+    phi, theta, psi = _vector(lam, "lam", 3)
+    cf, sf = math.cos(phi), math.sin(phi)
+    ct, st = math.cos(theta), math.sin(theta)
+    cp, sp = math.cos(psi), math.sin(psi)
+    return np.array(  # report eq. (2.6)
+        [
+            [ct * cp, cp * st * sf - cf * sp, sf * sp + cf * cp * st],
+            [ct * sp, cf * cp + st * sf * sp, cf * st * sp - cp * sf],
+            [-st, ct * sf, ct * cf],
+        ]
+    )
+
+
+def euler_rate_matrix(lam: ArrayLike) -> FloatArray:
+    """``Q(lambda)`` (3, 3) with ``d lambda / dt = Q(lambda) omega`` (report eq. 2.7).
+
+    Parameters
+    ----------
+    lam : array_like (3,)
+        ``[phi, theta, psi]``, rad; ``|theta|`` must stay away from ``pi / 2`` (gimbal lock).
+
+    Returns
+    -------
+    ndarray (3, 3)
+    """
+    phi, theta, _ = _vector(lam, "lam", 3)
+    ct = math.cos(theta)
+    if abs(ct) < 1e-9:
+        raise ValueError(f"lam: pitch theta = {theta!r} rad is at the Z-Y-X singularity")
+    cf, sf, tt = math.cos(phi), math.sin(phi), math.tan(theta)
+    return np.array(  # report eq. (2.7)
+        [
+            [1.0, sf * tt, cf * tt],
+            [0.0, cf, -sf],
+            [0.0, sf / ct, cf / ct],
+        ]
+    )
+
+
+def derivatives(
+    state: ArrayLike,
+    u: ArrayLike,
+    params: ARDrone2Params,
+    *,
+    gyroscopic: bool = False,
+) -> FloatArray:
+    """Time derivative of the 12-state rigid-body model (report eqs. 2.1-2.4 / A.5-A.16).
+
+    Parameters
+    ----------
+    state : array_like (12,)
+        ``[x, y, z, u, v, w, phi, theta, psi, p, q, r]``: NED position (m) and velocity (m/s)
+        in the inertial frame, Z-Y-X Euler angles (rad), body rates (rad/s).
+    u : array_like (4,)
+        ``[T, tau_x, tau_y, tau_z]``: total thrust (N, along body -z) and body torques (N m).
+    params : ARDrone2Params
+        Supplies ``mass`` (kg), ``J`` (kg m^2) and ``g`` (m/s^2).
+    gyroscopic : bool
+        Include the gyroscopic term. The report neglects it (A.14-A.16, the default here).
+        When True this uses Euler's equation ``J omega' = tau - omega x J omega``; the report's
+        eq. (2.4)/(A.4) prints ``+ omega x J omega``, which does not conserve angular momentum.
+
+    Returns
+    -------
+    ndarray (12,)
+        ``d state / dt`` in the units of ``state`` per second.
+    """
+    s = _vector(state, "state", 12)
+    u = _vector(u, "u", 4)
+    p = check_params(params)
+    if not isinstance(gyroscopic, bool):
+        raise TypeError(f"gyroscopic: expected bool, got {type(gyroscopic).__name__}")
+    vel, lam, omega = s[3:6], s[6:9], s[9:12]
+    thrust, tau = u[0], u[1:]
+    R = rotation_matrix(lam)
+    acc = -R @ E3 * thrust / p.mass + p.g * E3  # report eq. (2.2) / (A.11)-(A.13)
+    lam_dot = euler_rate_matrix(lam) @ omega  # report eq. (2.3) / (A.8)-(A.10)
+    inertia = np.array([p.Ixx, p.Iyy, p.Izz])
+    moment = tau.copy()  # report eq. (A.14)-(A.16)
+    if gyroscopic:
+        moment -= np.cross(omega, inertia * omega)  # Euler's equation (report eq. 2.4, see above)
+    omega_dot = moment / inertia
+    return np.concatenate([vel, acc, lam_dot, omega_dot])  # report eq. (2.1) / (A.5)-(A.7)
+
+
+def motor_lag_derivative(pwm_bar: ArrayLike, pwm_bar_cmd: ArrayLike, tau_c: float) -> FloatArray:
+    """First-order motor lag ``d pwm_bar / dt = (pwm_hat - pwm_bar) / tau_c`` (report eq. 2.13).
+
+    The report prints the left-hand side without its time derivative; it means the lagged
+    squared term ``pwm_bar`` follows the commanded ``pwm_hat = (pwm + k)^2`` (from
+    :func:`visloc.model.pwm_bar`) with time constant ``tau_c``. The report gives no value for
+    ``tau_c`` and leaves the lag out of its model.
+
+    Parameters
+    ----------
+    pwm_bar : array_like (4,)
+        Current (lagged) squared terms of motors 1-4, %^2.
+    pwm_bar_cmd : array_like (4,)
+        Commanded squared terms ``pwm_hat``, %^2.
+    tau_c : float
+        Time constant, s (> 0).
+
+    Returns
+    -------
+    ndarray (4,)
+        ``d pwm_bar / dt``, %^2/s; ``mixer @ pwm_bar`` gives the lagged ``u``.
+    """
+    x = _vector(pwm_bar, "pwm_bar", 4)
+    cmd = _vector(pwm_bar_cmd, "pwm_bar_cmd", 4)
+    if isinstance(tau_c, bool) or not isinstance(tau_c, numbers.Real) or not 0 < tau_c < math.inf:
+        raise ValueError(f"tau_c: expected a finite time constant > 0 s, got {tau_c!r}")
+    return (cmd - x) / tau_c  # report eq. (2.13)

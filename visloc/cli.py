@@ -158,6 +158,9 @@ def build_parser() -> argparse.ArgumentParser:
     tk.add_argument("--max-frames", type=_count, metavar="N", help="stop after N frames")
     tk.add_argument("--quiet", action="store_true", help="no progress bar or summary")
 
+    md = sub.add_parser("model", help="the AR.Drone 2.0 model: identified parameters, hover trim, linear poles")
+    md.add_argument("--json", action="store_true", help="print JSON instead of a table")
+
     m = sub.add_parser("demo", help="render a few frames, detect markers and poses, print a table")
     m.add_argument("--out", default="visloc-demo", metavar="DIR", help="output folder (default ./visloc-demo)")
     m.add_argument("--frames", type=_count, default=6, help="number of frames (default 6)")
@@ -177,7 +180,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     from visloc import commands  # imported late: `visloc --help` stays fast
 
     run = {"detect": commands.detect, "render": commands.render, "demo": commands.demo,
-           "flow": commands.flow, "track": commands.track, "localize": commands.localize}[args.command]
+           "flow": commands.flow, "track": commands.track, "localize": commands.localize,
+           "model": commands.model}[args.command]
     try:
         return run(args)
     except KeyboardInterrupt:

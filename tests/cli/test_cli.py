@@ -139,3 +139,15 @@ def test_an_interrupted_run_keeps_the_frames_already_written(rendered, tmp_path,
     assert main(["detect", str(rendered), "--out", str(out), "--quiet"]) == 130
     assert [r["frame"] for r in _lines(out)] == [0, 1]
     assert "interrupted" in capsys.readouterr().err
+
+
+def test_model_json_has_the_hover_trim(capsys):
+    import json as _json
+
+    assert main(["model", "--json"]) == 0
+    d = _json.loads(capsys.readouterr().out)
+    m, g, c, k = d["mass_kg"], d["g"], d["thrust_coefficient_c_mean"], d["pwm_shift_k"]
+    assert d["hover_pwm_percent"] == pytest.approx([np.sqrt(m * g / (4 * c)) - k] * 4, abs=1e-9)
+    assert round(d["hover_pwm_percent"][0], 1) == 66.9
+    assert len(d["open_loop_poles"]) == 12 and max(p[0] for p in d["open_loop_poles"]) < 1e-6
+    assert main(["model"]) == 0 and "hover" in capsys.readouterr().out

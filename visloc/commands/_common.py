@@ -1,0 +1,54 @@
+"""Helpers shared by the commands: warnings, the frame loop, marker records, camera scaling."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+import numpy as np
+from tqdm import tqdm
+
+from visloc.pose import Camera
+from visloc.types import MarkerDetection, Pose
+
+
+def warn(command: str, text: str) -> None:
+    tqdm.write(f"visloc {command}: warning: {text}", file=sys.stderr)
+
+def frames_of(source, args: argparse.Namespace):
+    """The frames of an open source with a progress bar (unless ``--quiet``), stopping after
+    ``--max-frames``."""
+    try:
+        total = len(source)
+    except TypeError:
+        total = None
+    if args.max_frames:
+        total = min(total, args.max_frames) if total else args.max_frames
+    bar = tqdm(source, total=total, unit="frame", disable=True if args.quiet else None, file=sys.stderr)
+    for n, frame in enumerate(bar):
+        if args.max_frames and n >= args.max_frames:
+            break
+        yield frame
+
+def marker_records(dets: list[MarkerDetection], poses: list[Pose | None] | None) -> list[dict]:
+    """JSON records of detections, with pose fields (``rvec``, ``tvec``, ``R``, Euler angles,
+    reprojection RMS, ``distance_m``) where a pose is given."""
+    out = []
+    for k, d in enumerate(dets):
+        rec = d.to_dict()
+        pose = poses[k] if poses else None
+        if pose is not None:
+            rec.update(pose.to_dict())
+            rec["distance_m"] = float(np.linalg.norm(pose.t))
+        out.append(rec)
+    return out
+
+def camera_for(camera: Camera, shape: tuple[int, ...], warned: list[bool]) -> Camera:
+    """The camera scaled to a frame's size when its file names another size (warn once)."""
+    h, w = shape[:2]
+    if camera.size is None or tuple(camera.size) == (w, h):
+        return camera
+    if not warned[0]:
+        warn("detect", f"camera file is for {camera.size[0]}x{camera.size[1]}, frames are {w}x{h}: scaling it")
+        warned[0] = True
+    return camera.scaled(w, h)

@@ -1,0 +1,115 @@
+"""``visloc flow`` and ``visloc render flow``: ground velocity of a downward camera."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from contextlib import ExitStack
+
+import numpy as np
+from tqdm import tqdm
+
+from visloc.cli import UsageError
+from visloc.commands._common import camera_for, frames_of, warn
+from visloc.io import RerunLogger, open_source
+from visloc.pose import Camera
+
+
+def render_flow(args: argparse.Namespace) -> int:
+    from visloc.synth.flight import render_flight, write_flight
+
+    n = max(1, round(args.seconds * args.fps))
+    with tqdm(total=n, unit="frame", disable=None, file=sys.stderr) as bar:
+        flight = render_flight(args.seconds, args.fps, size=args.size, seed=args.seed, texture=args.texture,
+                               progress=lambda k: bar.update(1))
+    out = write_flight(args.outdir, flight, video=args.video)
+    what = "flight.mp4" if args.video else f"{len(flight.frames)} frames"
+    print(f"visloc render: wrote {what}, ground_truth.csv, heights.csv and camera.yml to {out}")
+    return 0
+
+def _read_heights(path: str) -> dict[int, float]:
+    """frame -> height (m) from a CSV with a header naming ``frame`` and ``height``."""
+    import csv
+
+    try:
+        with open(path, newline="") as fh:
+            rows = list(csv.DictReader(fh))
+    except OSError as exc:
+        raise UsageError(f"cannot read --height-csv {path}: {exc.strerror}") from None
+    if not rows or "frame" not in rows[0] or "height" not in rows[0]:
+        raise UsageError(f"--height-csv {path} needs a header with 'frame' and 'height' columns")
+    try:
+        heights = {int(r["frame"]): float(r["height"]) for r in rows}
+    except ValueError as exc:
+        raise UsageError(f"--height-csv {path}: {exc}") from None
+    bad = [f for f, h in heights.items() if not 0 < h < float("inf")]
+    if bad:
+        raise UsageError(f"--height-csv {path}: non-positive height at frame {bad[0]}")
+    return heights
+
+FLOW_COLUMNS = ["frame", "time", "source", "vx", "vy", "speed", "yaw_rate", "quality", "reason", "x", "y", "yaw"]
+
+def flow(args: argparse.Namespace) -> int:
+    """``visloc flow``: ground velocity and integrated track of a downward camera."""
+    from visloc.flow import EgoMotion
+    from visloc.io import CsvWriter, ImageListSource
+
+    camera = Camera.from_file(args.camera)
+    heights = _read_heights(args.height_csv) if args.height_csv else None
+    failed = n_frames = 0
+    times: list[float] = []
+    qualities: list[float] = []
+    with ExitStack() as stack:
+        source = stack.enter_context(open_source(args.source, fps=args.fps))
+        if isinstance(source, ImageListSource) and args.fps is None:
+            raise UsageError("image folders and globs need --fps (the time between frames)")
+        out = stack.enter_context(CsvWriter(args.out, FLOW_COLUMNS)) if args.out else None
+        rec = stack.enter_context(RerunLogger(args.rerun)) if args.rerun else None
+        ego: EgoMotion | None = None
+        last_time = 0.0
+        for frame in frames_of(source, args):
+            n_frames += 1
+            row = {"frame": frame.index, "time": frame.time, "source": frame.name}
+            if frame.image is None:
+                failed += 1
+                warn("flow", frame.error or f"cannot read {frame.name}")
+                if out:
+                    out.write(row | {"quality": 0.0, "reason": f"unreadable: {frame.error}"})
+                continue
+            height = args.height
+            if heights is not None:
+                height = heights.get(frame.index)
+                if height is None:
+                    raise UsageError(f"--height-csv has no height for frame {frame.index}")
+            cam = camera_for(camera, frame.image.shape, [True])
+            if ego is None or ego.frame_shape != frame.image.shape[:2]:
+                if ego is not None:
+                    warn("flow", f"{frame.name} has another size than the frame before: the track restarts")
+                ego = EgoMotion(cam, options={"method": args.method})
+                ego.update(frame.image, height=height)
+                last_time = frame.time
+                if out:
+                    out.write(row | {"quality": 0.0, "reason": "first frame", "x": 0.0, "y": 0.0, "yaw": 0.0})
+                if rec:
+                    rec.log_flow(frame.index, frame.time, frame.image, None, None, (0.0, 0.0))
+                continue
+            dt = frame.time - last_time
+            if not dt > 0:
+                raise UsageError(f"frame times must increase; {frame.name} is at {frame.time} s after {last_time} s")
+            t0 = time.perf_counter()
+            gv = ego.update(frame.image, dt=dt, height=height)
+            times.append(time.perf_counter() - t0)
+            qualities.append(gv.quality)
+            last_time = frame.time
+            x, y = ego.position
+            if out:
+                out.write(row | {"vx": gv.v[0], "vy": gv.v[1], "speed": float(np.hypot(*gv.v)), "yaw_rate": gv.yaw_rate,
+                                 "quality": gv.quality, "reason": gv.reason, "x": x, "y": y, "yaw": ego.yaw})
+            if rec:
+                rec.log_flow(frame.index, frame.time, frame.image, ego.last_field, gv, (x, y))
+    if not args.quiet:
+        ms = f", median {1e3 * float(np.median(times)):.2f} ms per pair" if times else ""
+        q = f", median quality {float(np.median(qualities)):.2f}" if qualities else ""
+        print(f"visloc flow: {n_frames} frames, {failed} unreadable{ms}{q}", file=sys.stderr)
+    return 1 if failed else 0

@@ -1,0 +1,207 @@
+"""``visloc localize``, ``visloc track`` and ``visloc render localize``: pose over marker maps."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from contextlib import ExitStack
+from pathlib import Path
+
+import numpy as np
+
+from visloc.cli import UsageError
+from visloc.commands._common import camera_for, frames_of, warn
+from visloc.io import JsonlWriter, RerunLogger, open_source
+from visloc.markers import MarkerDetector
+from visloc.pose import Camera
+
+LOCALIZE_GRID = {"rows": 10, "cols": 10, "marker_length": 0.10, "spacing": 0.05}
+
+LOCALIZE_COLUMNS = ["frame", "time", "source", "x", "y", "z", "vx", "vy", "vz", "std_x", "std_y", "std_z",
+                    "markers", "fix", "error_m"]
+
+def render_localize(args: argparse.Namespace) -> int:
+    import cv2
+
+    from visloc.pose.maps import GridMap
+    from visloc.synth import write_camera_yml
+    from visloc.synth.grid import render_map_flight
+
+    grid = GridMap(**LOCALIZE_GRID)
+    flight = render_map_flight(args.seconds, args.fps, grid, seed=args.seed, dictionary="DICT_4X4_100",
+                               background="gravel", blur_sigma=0.5, noise_sigma=1.0)
+    out = Path(args.outdir)
+    out.mkdir(parents=True, exist_ok=True)
+    for k, img in enumerate(flight.frames):
+        if not cv2.imwrite(str(out / f"frame_{k:05d}.png"), img):
+            raise OSError(f"cannot write {out / f'frame_{k:05d}.png'}")
+    tr = flight.track
+    rows = np.column_stack([np.arange(len(tr.t)), tr.t, tr.position, tr.velocity, tr.yaw, tr.roll, tr.pitch])
+    np.savetxt(out / "ground_truth.csv", rows, delimiter=",", comments="",
+               header="frame,t,x,y,z,vx,vy,vz,yaw,roll,pitch", fmt=["%d"] + ["%.10g"] * (rows.shape[1] - 1))
+    np.savetxt(out / "imu.csv", flight.imu, delimiter=",", comments="", header="t,gx,gy,gz,fx,fy,fz", fmt="%.10g")
+    grid.to_file(out / "map.yml")
+    write_camera_yml(out / "camera.yml", flight.K, (flight.frames.shape[2], flight.frames.shape[1]))
+    print(f"visloc render: wrote {len(tr.t)} frames, map.yml (DICT_4X4_100), camera.yml, imu.csv and "
+          f"ground_truth.csv to {out}")
+    return 0
+
+def _read_imu(path: str) -> np.ndarray:
+    """(M, 4) ``t, fx, fy, fz`` (specific force in camera axes, m/s^2) from an IMU CSV with
+    columns ``t,gx,gy,gz,fx,fy,fz`` (as ``visloc render localize`` writes), sorted by time."""
+    try:
+        data = np.genfromtxt(path, delimiter=",", names=True)
+    except (OSError, ValueError) as exc:
+        raise UsageError(f"cannot read --imu {path}: {exc}") from None
+    if data.dtype.names is None or not {"t", "fx", "fy", "fz"} <= set(data.dtype.names):
+        raise UsageError(f"--imu {path} needs a header with t, fx, fy and fz columns")
+    imu = np.column_stack([np.atleast_1d(data[k]) for k in ("t", "fx", "fy", "fz")])
+    imu = imu[np.isfinite(imu).all(axis=1)]
+    if len(imu) == 0 or (np.diff(imu[:, 0]) <= 0).any():
+        raise UsageError(f"--imu {path}: times must be finite and increasing")
+    return imu
+
+def _read_truth(path: str) -> dict[str, np.ndarray]:
+    try:
+        data = np.genfromtxt(path, delimiter=",", names=True)
+    except (OSError, ValueError) as exc:
+        raise UsageError(f"cannot read --truth {path}: {exc}") from None
+    if data.dtype.names is None or not {"t", "x", "y", "z"} <= set(data.dtype.names):
+        raise UsageError(f"--truth {path} needs a header with t, x, y and z columns")
+    return {k: np.atleast_1d(data[k]) for k in ("t", "x", "y", "z")}
+
+def localize(args: argparse.Namespace) -> int:
+    """``visloc localize``: the camera's position over a marker map per frame, filtered by a
+    constant-velocity Kalman filter (filterpy) into position and velocity with uncertainty."""
+    from visloc.estimation.kalman import PositionVelocityKF
+    from visloc.io import CsvWriter, ImageListSource
+    from visloc.pose.map_pose import estimate_camera_pose
+    from visloc.pose.maps import MarkerMap
+
+    detector = MarkerDetector(args.dict)
+    camera = Camera.from_file(args.camera)
+    mmap = MarkerMap.from_file(args.map)
+    truth = _read_truth(args.truth) if args.truth else None
+    imu = _read_imu(args.imu) if args.imu else None
+    kf = PositionVelocityKF(3, model="cv", accel_noise=args.accel_noise)
+    gravity = np.array([0.0, 0.0, -9.81])  # the map's z axis points up, out of the markers
+    R_map_cam = None
+    last_t = None
+    failed = n_frames = fixes = 0
+    errors: list[float] = []
+    with ExitStack() as stack:
+        source = stack.enter_context(open_source(args.source, fps=args.fps))
+        if isinstance(source, ImageListSource) and args.fps is None:
+            raise UsageError("image folders and globs need --fps (the time between frames)")
+        out = stack.enter_context(CsvWriter(args.out, LOCALIZE_COLUMNS)) if args.out else None
+        rec = stack.enter_context(RerunLogger(args.rerun)) if args.rerun else None
+        for frame in frames_of(source, args):
+            n_frames += 1
+            row: dict = {"frame": frame.index, "time": frame.time, "source": frame.name}
+            if frame.image is None:
+                failed += 1
+                warn("localize", frame.error or f"cannot read {frame.name}")
+                if out:
+                    out.write(row | {"fix": "unreadable"})
+                continue
+            cam = camera_for(camera, frame.image.shape, [True])
+            mp = estimate_camera_pose(detector.detect(frame.image), mmap, cam)
+            accel = None
+            if imu is not None and R_map_cam is not None and last_t is not None:
+                # mean specific force over the interval, turned into the map frame: a = R f + g
+                sel = (imu[:, 0] > last_t) & (imu[:, 0] <= frame.time)
+                if sel.any():
+                    accel = R_map_cam @ imu[sel, 1:].mean(axis=0) + gravity
+            kf.predict(frame.time, accel=accel)
+            last_t = frame.time
+            if mp is not None:
+                R_map_cam = mp.R_map_cam
+            fix = "none"
+            if mp is not None:
+                # the pose's own covariance, floored at 1 mm (model errors the corners don't show)
+                cov = mp.position_covariance
+                R = np.eye(3) * 1e-6 if cov is None else cov + np.eye(3) * 1e-6
+                fix = "used" if kf.update_position(mp.position, R=R) else "rejected"
+                fixes += fix == "used"
+            pos, vel = kf.position, kf.velocity
+            sd = np.sqrt(np.clip(np.diag(kf.P)[:: kf.order], 0, None)) if kf.P is not None else np.full(3, np.nan)
+            row |= {"x": pos[0], "y": pos[1], "z": pos[2], "vx": vel[0], "vy": vel[1], "vz": vel[2],
+                    "std_x": sd[0], "std_y": sd[1], "std_z": sd[2],
+                    "markers": len(mp.used) if mp is not None else 0, "fix": fix}
+            true_pos = None
+            if truth is not None:
+                true_pos = np.array([np.interp(frame.time, truth["t"], truth[k]) for k in ("x", "y", "z")])
+                row["error_m"] = float(np.linalg.norm(pos - true_pos))
+                errors.append(row["error_m"])
+            if out:
+                out.write(row)
+            if rec:
+                rec.log_localize(frame.index, frame.time, frame.image, pos, true_pos)
+    if not args.quiet:
+        err = f", median position error {1e3 * float(np.median(errors)):.1f} mm" if errors else ""
+        print(f"visloc localize: {n_frames} frames, {fixes} position fixes, {failed} unreadable{err}", file=sys.stderr)
+    return 1 if failed else 0
+
+def track(args: argparse.Namespace) -> int:
+    """``visloc track``: pose of a body relative to reference markers, per frame, with an
+    observer velocity (report eq. 3.14), as JSON lines and optionally UDP datagrams."""
+    import json
+    import socket
+
+    from visloc.estimation import LuenbergerObserver
+    from visloc.pose.maps import MarkerMap
+    from visloc.pose.relative import track_body
+
+    detector = MarkerDetector(args.dict)
+    camera = Camera.from_file(args.camera)
+    body = MarkerMap.from_file(args.body)
+    reference = MarkerMap.from_file(args.reference)
+    target = None
+    if args.udp:
+        host, _, port = args.udp.rpartition(":")
+        if not host or not port.isdigit() or not 0 < int(port) < 65536:
+            raise UsageError(f"--udp must be HOST:PORT, got {args.udp!r}")
+        target = (host, int(port))
+    failed = n_frames = lost = 0
+    observer = None
+    last_time = None
+    with ExitStack() as stack:
+        source = stack.enter_context(open_source(args.source, fps=args.fps))
+        out = stack.enter_context(JsonlWriter(args.out)) if args.out else None
+        sock = stack.enter_context(socket.socket(socket.AF_INET, socket.SOCK_DGRAM)) if target else None
+        for frame in frames_of(source, args):
+            n_frames += 1
+            rec: dict = {"frame": frame.index, "source": frame.name, "time": frame.time}
+            if frame.image is None:
+                failed += 1
+                warn("track", frame.error or f"cannot read {frame.name}")
+                rec["error"] = frame.error
+            else:
+                cam = camera_for(camera, frame.image.shape, [True])
+                bp = track_body(detector.detect(frame.image), body, reference, cam)
+                dt = None if last_time is None else frame.time - last_time
+                if dt is not None and not dt > 0:
+                    raise UsageError(f"frame times must increase; {frame.name} is at {frame.time} s")
+                if bp is None:
+                    lost += 1
+                    rec["lost"] = True
+                    if observer is not None and dt is not None:
+                        p, v = observer.update(None, dt)
+                        rec |= {"predicted_x": float(p[0]), "predicted_y": float(p[1]),
+                                "vx": float(v[0]), "vy": float(v[1])}
+                else:
+                    rec |= bp.to_dict()
+                    if observer is None:
+                        observer = LuenbergerObserver(args.poles, 1.0 / 30.0, initial_position=bp.position[:2])
+                        rec |= {"vx": 0.0, "vy": 0.0}
+                    else:
+                        _, v = observer.update(bp.position[:2], dt)
+                        rec |= {"vx": float(v[0]), "vy": float(v[1])}
+                last_time = frame.time
+            if out:
+                out.write(rec)
+            if sock is not None:
+                sock.sendto(json.dumps(rec).encode(), target)
+    if not args.quiet:
+        print(f"visloc track: {n_frames} frames, {lost} without both maps, {failed} unreadable", file=sys.stderr)
+    return 1 if failed else 0

@@ -212,6 +212,16 @@ class RerunLogger(Closing):
         )
         self._log_poses(ids, poses, marker_length)
 
+    def _frame(self, index: int, time: float, image: NDArray[np.uint8] | None):
+        """Set both timelines and log the image (if any); returns the recording stream."""
+        rec = self.recording
+        rec.set_time("frame", sequence=int(index))
+        rec.set_time("time", duration=float(time))
+        if image is not None:
+            img = rr.Image(_rgb(image))
+            rec.log("camera/image", img if self.jpeg_quality is None else img.compress(jpeg_quality=int(self.jpeg_quality)))
+        return rec
+
     def log_flow(
         self,
         index: int,
@@ -229,12 +239,7 @@ class RerunLogger(Closing):
         ``field`` is a :class:`visloc.types.FlowField` (or None), ``velocity`` a
         :class:`visloc.types.GroundVelocity` (or None for the first frame).
         """
-        rec = self.recording
-        rec.set_time("frame", sequence=int(index))
-        rec.set_time("time", duration=float(time))
-        if image is not None:
-            img = rr.Image(_rgb(image))
-            rec.log("camera/image", img if self.jpeg_quality is None else img.compress(jpeg_quality=int(self.jpeg_quality)))
+        rec = self._frame(index, time, image)
         if field is not None and len(field.centers):
             good = np.asarray(field.confidence) > 0.2
             rec.log("camera/image/flow", rr.Arrows2D(origins=field.centers[good] + _HALF_PIXEL,
@@ -253,12 +258,7 @@ class RerunLogger(Closing):
         """Log one frame of a localisation run: the image, the estimated position (and the
         true one when known) as scalar plots (``plots/x`` ...), and both tracks in 3-D
         (``world/estimate``, ``world/truth``)."""
-        rec = self.recording
-        rec.set_time("frame", sequence=int(index))
-        rec.set_time("time", duration=float(time))
-        if image is not None:
-            img = rr.Image(_rgb(image))
-            rec.log("camera/image", img if self.jpeg_quality is None else img.compress(jpeg_quality=int(self.jpeg_quality)))
+        rec = self._frame(index, time, image)
         for name, p in (("estimate", estimate), ("truth", truth)):
             if p is None:
                 continue

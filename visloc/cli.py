@@ -161,6 +161,11 @@ def build_parser() -> argparse.ArgumentParser:
     md = sub.add_parser("model", help="the AR.Drone 2.0 model: identified parameters, hover trim, linear poles")
     md.add_argument("--json", action="store_true", help="print JSON instead of a table")
 
+    rb = sub.add_parser("robust", help="robust stability of the hover controller over the propulsion box")
+    rb.add_argument("--sigma", type=float, default=3.0, metavar="N",
+                    help="box half-width in standard deviations of c and d (default 3)")
+    rb.add_argument("--json", action="store_true", help="print JSON instead of a table")
+
     m = sub.add_parser("demo", help="render a few frames, detect markers and poses, print a table")
     m.add_argument("--out", default="visloc-demo", metavar="DIR", help="output folder (default ./visloc-demo)")
     m.add_argument("--frames", type=_count, default=6, help="number of frames (default 6)")
@@ -181,7 +186,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     run = {"detect": commands.detect, "render": commands.render, "demo": commands.demo,
            "flow": commands.flow, "track": commands.track, "localize": commands.localize,
-           "model": commands.model}[args.command]
+           "model": commands.model, "robust": commands.robust}[args.command]
     try:
         return run(args)
     except KeyboardInterrupt:

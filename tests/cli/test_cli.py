@@ -151,3 +151,12 @@ def test_model_json_has_the_hover_trim(capsys):
     assert round(d["hover_pwm_percent"][0], 1) == 66.9
     assert len(d["open_loop_poles"]) == 12 and max(p[0] for p in d["open_loop_poles"]) < 1e-6
     assert main(["model"]) == 0 and "hover" in capsys.readouterr().out
+
+
+def test_robust_json_reports_a_stable_polytope_and_rejects_a_sigma_beyond_the_box(capsys):
+    assert main(["robust", "--sigma", "1", "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["vertices"] == 256 and s["vertex_stable"] is True
+    assert s["max_real_eig"] < 0 and s["lyapunov"] in {"feasible", "infeasible", "unavailable"}
+    assert main(["robust", "--sigma", "99"]) == 2
+    assert "n_sigma" in capsys.readouterr().err

@@ -10,5 +10,6 @@ from visloc.commands.flow import flow
 from visloc.commands.localize import localize, track
 from visloc.commands.markers import detect, render
 from visloc.commands.model import model, model_summary
+from visloc.commands.robust import robust
 
-__all__ = ["demo", "detect", "flow", "localize", "model", "model_summary", "render", "track"]
+__all__ = ["demo", "detect", "flow", "localize", "model", "model_summary", "render", "robust", "track"]

@@ -1,0 +1,116 @@
+"""Streaming controller on the non-linear model (report §4.2, Figure 4.4, §4.4, eq. 4.6)."""
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from visloc.control import Controller, wrap_angle
+from visloc.model import ARDRONE2, derivatives, hover_pwm, mixer_matrix, pwm_bar
+
+P = ARDRONE2
+DT = 0.005  # 200 Hz, the AR.Drone's navdata rate
+
+
+def simulate(ctrl, setpoint, seconds, *, state=None, c=None, d=None):
+    """RK4 of the rigid body driven by the motors: ``u = Gamma_true (pwm + k)^2`` held per step."""
+    gamma = mixer_matrix(P, c=c, d=d, arm=ctrl.arm)
+    x = np.zeros(12) if state is None else np.array(state, float)
+    log = []
+    for _ in range(round(seconds / DT)):
+        cmd = ctrl.pwm(x, setpoint, DT)
+        u = gamma @ pwm_bar(cmd.pwm, P.k)
+
+        def f(s, u=u):
+            return derivatives(s, u, P)
+
+        k1 = f(x)
+        k2 = f(x + 0.5 * DT * k1)
+        k3 = f(x + 0.5 * DT * k2)
+        k4 = f(x + DT * k3)
+        x = x + DT / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        log.append(x)
+    return np.array(log)
+
+
+def test_hover_at_the_setpoint_gives_the_trim():
+    ctrl = Controller()
+    sp = np.array([1.0, -2.0, -1.5, 0.4])
+    x = np.zeros(12)
+    x[:3], x[8] = sp[:3], sp[3]
+    np.testing.assert_allclose(ctrl.command(x, sp, DT), [P.mass * P.g, 0, 0, 0], atol=1e-12)
+    res = ctrl.pwm(x, sp, DT)
+    np.testing.assert_allclose(res.pwm, hover_pwm(P), rtol=1e-12)
+    assert not res.saturated
+
+
+def test_error_state_is_in_the_pilot_frame():
+    ctrl = Controller()
+    x = np.zeros(12)
+    x[8] = math.pi / 2  # heading east
+    x[3] = 1.0  # flying north at 1 m/s
+    e = ctrl.error_state(x, [0.0, 1.0, 0.0, -math.pi + 0.1])  # set point 1 m east
+    np.testing.assert_allclose(e[:2], [-1.0, 0.0], atol=1e-12)  # it lies straight ahead
+    np.testing.assert_allclose(e[3:5], [0.0, -1.0], atol=1e-12)  # north is to the left
+    assert e[8] == pytest.approx(wrap_angle(math.pi / 2 + math.pi - 0.1))
+    assert abs(e[8]) <= math.pi
+
+
+def test_side_step_settles():
+    ctrl = Controller()
+    log = simulate(ctrl, [0.0, 1.0, 0.0, 0.0], 12.0)
+    assert abs(log[-1, 1] - 1.0) < 0.02 and np.max(np.abs(log[-1, [0, 2]])) < 0.01
+    assert np.max(log[:, 1]) < 1.1  # the integrators do not wind up on the step
+    assert np.max(np.abs(log[:, 6])) < 0.35  # the roll needed for 1 m stays modest
+    assert np.max(log[:, 2]) > 0  # it sinks a little while rolled (report §4.4, Fig. 4.6)
+
+
+def test_integrators_running_all_the_time_overshoot():
+    always = Controller(integral_zone=(1e9, 1e9))
+    log = simulate(always, [0.0, 1.0, 0.0, 0.0], 8.0)
+    assert np.max(log[:, 1]) > 1.15
+
+
+def test_bounded_torques_limit_the_roll_of_large_steps():
+    sp = [0.0, 6.0, 0.0, 0.0]
+    bounded = simulate(Controller(max_tilt=0.3), sp, 15.0)
+    free = simulate(Controller(max_tilt=math.inf), sp, 15.0)
+    roll_bounded = np.max(np.abs(bounded[:, 6]))
+    assert roll_bounded < 0.4 < np.max(np.abs(free[:, 6]))
+    assert abs(bounded[-1, 1] - 6.0) < 0.05
+
+
+def test_integral_action_removes_the_motor_spread_offset():
+    c = np.array(P.c_quad4)  # the measured motors of quadrotor 4 instead of the mean
+    d = np.array(P.d_quad4)
+    sp = [0.5, 0.0, -1.0, 0.3]
+    ctrl = Controller()
+    log = simulate(ctrl, sp, 40.0, c=c, d=d)
+    assert np.max(np.abs(log[:, 0] - sp[0])) > 1.0  # the spread's pitch torque drifts it first
+    np.testing.assert_allclose(log[-1, [0, 1, 2, 8]], sp, atol=0.02)
+    assert np.any(np.abs(ctrl.integral) > 1e-3)
+    ctrl.reset()
+    assert not np.any(ctrl.integral)
+
+
+def test_arm_from_params_and_arguments():
+    assert Controller().arm == 0.125
+    assert Controller(dataclasses.replace(P, arm=0.14)).arm == 0.14
+    assert Controller(arm=0.1).gamma[1, 0] == pytest.approx(0.1 * P.c_mean)
+
+
+def test_bad_arguments():
+    ctrl = Controller()
+    with pytest.raises(ValueError, match="state"):
+        ctrl.command(np.zeros(9), np.zeros(4), DT)
+    with pytest.raises(ValueError, match="setpoint"):
+        ctrl.command(np.zeros(12), np.zeros(3), DT)
+    with pytest.raises(ValueError, match="dt"):
+        ctrl.command(np.zeros(12), np.zeros(4), -0.01)
+    with pytest.raises(ValueError, match="state"):
+        ctrl.command(np.full(12, np.nan), np.zeros(4), DT)
+    with pytest.raises(ValueError, match="max_tilt"):
+        Controller(max_tilt=0.0)
+    with pytest.raises(TypeError, match="gains"):
+        Controller(gains={"roll": 1.0})

@@ -1,0 +1,134 @@
+"""Polytope robustness against the motor spread (report §4.3, eqs. 4.12-4.16)."""
+
+import sys
+
+import numpy as np
+import pytest
+
+from visloc.control import (
+    closed_loop_vertices,
+    common_lyapunov,
+    design_gains,
+    largest_sigma,
+    max_sigma,
+    robust_summary,
+    vertex_check,
+    vertex_stability,
+)
+from visloc.model import ARDRONE2
+
+P = ARDRONE2
+# FIELD-NOTES: both vertices have the double eigenvalue -1, their midpoint has +0.5
+A1 = np.array([[-1.0, 3.0], [0.0, -1.0]])
+A2 = np.array([[-1.0, 0.0], [3.0, -1.0]])
+
+
+def test_stable_vertices_do_not_make_a_stable_polytope():
+    stable, worst, _ = vertex_stability(np.array([A1, A2]))
+    assert stable and worst == pytest.approx(-1.0)
+    mid_stable, mid_worst, _ = vertex_stability(((A1 + A2) / 2)[None])
+    assert not mid_stable and mid_worst == pytest.approx(0.5)
+    pytest.importorskip("cvxpy", exc_type=ImportError)
+    assert common_lyapunov(np.array([A1, A2])).status == "infeasible"
+    # a pair that does share one (the identity works for both): feasible and verified
+    b1 = np.array([[-1.0, 1.0], [0.0, -1.0]])
+    res = common_lyapunov(np.array([b1, b1.T]))
+    assert res.status == "feasible" and res.max_lmi_eig < 0
+    assert np.all(np.linalg.eigvalsh(res.P) > 0)
+
+
+def test_lyapunov_unavailable_without_cvxpy(monkeypatch):
+    monkeypatch.setitem(sys.modules, "cvxpy", None)  # import cvxpy now raises ImportError
+    res = common_lyapunov(np.array([A1, A2]))
+    assert res.status == "unavailable" and res.P is None
+    with pytest.raises(ValueError, match="test"):
+        largest_sigma("lyapunov")
+
+
+@pytest.fixture(scope="module")
+def gains():
+    return design_gains(P)
+
+
+def test_vertices_of_the_polytope(gains):
+    mats, ratios = closed_loop_vertices(2.0, gains=gains)
+    assert mats.shape == (256, 16, 16) and ratios.shape == (256, 8)
+    assert len({tuple(r) for r in ratios}) == 256 and np.all(np.abs(ratios) == 2.0)
+    nominal, _ = closed_loop_vertices(0.0, gains=gains)
+    np.testing.assert_allclose(nominal, nominal[0][None].repeat(256, axis=0))
+    assert closed_loop_vertices(1.0, gains=gains, integral=False)[0].shape == (256, 12, 12)
+    # the closed loop is affine in the ratios (eq. 4.15): the centre of two opposite vertices
+    # is the nominal loop
+    lo, hi = mats[0], mats[-1]
+    np.testing.assert_allclose((lo + hi) / 2, nominal[0], atol=1e-12)
+
+
+def test_designed_controller_passes_the_256_vertex_check_at_2_sigma(gains):
+    r = vertex_check(2.0, gains=gains)
+    assert r.vertices == 256 and r.vertex_stable
+    assert -0.36 < r.max_real_eig < -0.3  # the slow integral pole barely moves
+    assert r.lyapunov is None
+
+
+def test_lyapunov_certificate_at_2_sigma(gains):
+    pytest.importorskip("cvxpy", exc_type=ImportError)
+    mats, _ = closed_loop_vertices(2.0, gains=gains)
+    res = common_lyapunov(mats)
+    assert res.status == "feasible"
+    for a in mats[::17]:
+        assert np.max(np.linalg.eigvalsh(a.T @ res.P + res.P @ a)) < 0
+
+
+def test_no_common_lyapunov_matrix_at_6_sigma_though_every_vertex_is_stable(gains):
+    pytest.importorskip("cvxpy", exc_type=ImportError)
+    r = vertex_check(6.0, gains=gains, lyapunov=True)
+    assert r.vertex_stable and r.lyapunov == "infeasible"
+
+
+def test_the_arm_distance_does_not_change_the_spectra(gains):
+    # eq. (2.12)'s unknown d: a diagonal state scaling of the height and yaw chains maps one
+    # arm's closed loop onto another's, so neither test depends on it
+    a, _ = closed_loop_vertices(5.0, gains=gains, arm=0.10)
+    b, _ = closed_loop_vertices(5.0, gains=gains, arm=0.18)
+    assert np.max(np.abs(a - b)) > 1.0
+    for i in (0, 77, 200, 255):  # same characteristic polynomial
+        np.testing.assert_allclose(np.poly(a[i]), np.poly(b[i]), rtol=1e-9)
+
+
+def test_vertex_check_fails_far_out_and_largest_sigma(gains):
+    assert not vertex_check(8.0, gains=gains).vertex_stable
+    n = largest_sigma("vertex", gains=gains, tol=0.02)
+    assert 7.0 < n < 7.6
+    assert vertex_check(n, gains=gains).vertex_stable
+    assert not vertex_check(n + 0.02, gains=gains).vertex_stable
+    assert max_sigma(P) == pytest.approx(P.d_mean / P.d_std)
+
+
+def test_robust_summary_keys():
+    s = robust_summary(1.0)
+    assert {"vertices", "vertex_stable", "max_real_eig", "lyapunov"} <= set(s)
+    assert s["vertices"] == 256 and s["vertex_stable"] is True
+    assert isinstance(s["max_real_eig"], float)
+    assert s["lyapunov"] in ("feasible", "infeasible", "unavailable")
+    assert s["lyapunov"] == ("feasible" if _cvxpy_importable() else "unavailable")
+
+
+def _cvxpy_importable():
+    try:
+        import cvxpy  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def test_bad_arguments():
+    with pytest.raises(ValueError, match="n_sigma"):
+        vertex_check(-1.0)
+    with pytest.raises(ValueError, match="n_sigma"):
+        vertex_check(9.0)  # d_mean - 9 d_std < 0
+    with pytest.raises(TypeError, match="n_sigma"):
+        vertex_check("2")
+    with pytest.raises(ValueError, match="test"):
+        largest_sigma("eigen")
+    with pytest.raises(ValueError, match="matrices"):
+        vertex_stability(np.zeros((2, 3)))

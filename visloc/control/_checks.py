@@ -1,0 +1,77 @@
+"""Argument checks shared by the control modules (every message names the argument)."""
+
+from __future__ import annotations
+
+import math
+import numbers
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from visloc.model.params import ARDrone2Params
+from visloc.types import FloatArray
+
+DEFAULT_ARM = 0.125
+"""Arm distance ``d`` of eq. (2.12) used when ``params.arm`` is unset, m (see :func:`resolve_arm`)."""
+
+
+def check_real(
+    value: object,
+    name: str,
+    *,
+    positive: bool = False,
+    nonneg: bool = False,
+    allow_inf: bool = False,
+) -> float:
+    """Return ``value`` as a finite float (or ``+inf`` if allowed) or raise naming it."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise TypeError(f"{name}: expected a real number, got {type(value).__name__}")
+    v = float(value)
+    if not (math.isfinite(v) or (allow_inf and v == math.inf)):
+        raise ValueError(f"{name}: expected a finite value, got {v!r}")
+    if positive and v <= 0.0:
+        raise ValueError(f"{name}: expected > 0, got {v!r}")
+    if nonneg and v < 0.0:
+        raise ValueError(f"{name}: expected >= 0, got {v!r}")
+    return v
+
+
+def as_array(value: ArrayLike, name: str, shape: tuple[int, ...]) -> FloatArray:
+    """Return ``value`` as a finite float64 array of exactly ``shape`` or raise naming it."""
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"{name}: expected real numbers, got {type(value).__name__}") from exc
+    if arr.shape != shape:
+        raise ValueError(f"{name}: expected shape {shape}, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name}: expected finite values, got {arr!r}")
+    return arr
+
+
+def check_params(params: object, name: str = "params") -> ARDrone2Params:
+    """Raise ``TypeError`` unless ``params`` is an :class:`ARDrone2Params`; return it."""
+    if not isinstance(params, ARDrone2Params):
+        raise TypeError(f"{name}: expected ARDrone2Params, got {type(params).__name__}")
+    return params
+
+
+def resolve_arm(params: ARDrone2Params, arm: float | None = None) -> float:
+    """The arm distance ``d`` of eq. (2.12) to use, m.
+
+    The report never prints ``d`` (section 2.1: "the distance from the motor center to the
+    body frame axis, not the diagonal distance"), so the order is: the ``arm`` argument, then
+    ``params.arm``, then :data:`DEFAULT_ARM` = 0.125 m. That default is an estimate, not a
+    measurement: the AR.Drone 2.0 is about 0.45 m across its rotor tips along a body axis
+    with rotors of about 0.20 m diameter, which puts the motor centres about 0.25 m apart,
+    i.e. 0.125 m from each body axis (about 0.18 m along the diagonal). The state-feedback
+    gains do not depend on it (they are designed on ``u = [T, tau]``), and neither do the
+    robustness results: the arm only scales the cross-coupling between the thrust/yaw inputs
+    and the roll/pitch torques in ``Gamma(delta) Gamma_bar^-1``, which a diagonal scaling
+    of the (decoupled) height and yaw states undoes, so the vertex spectra and the
+    existence of a common Lyapunov matrix are the same for every ``d``. It matters for the
+    pwm commands (:meth:`visloc.control.Controller.pwm`) and motor saturation.
+    """
+    if arm is None:
+        arm = params.arm if params.arm is not None else DEFAULT_ARM
+    return check_real(arm, "arm", positive=True)

@@ -1,0 +1,194 @@
+"""The report's streaming state-feedback controller (report §4.2, Figure 4.4, §4.4).
+
+``u = u0 - K x`` (eq. 4.5) on the pilot-frame error state (eq. 4.1) with integrated position
+and heading errors (§4.2.3), gravity feed-forward ``T0 = m g`` (§4.2.2), bounded position
+torques for large set-point errors (§4.4) and the motor commands ``pwm = sqrt(Gamma^-1 u) - k``
+(eq. 4.6).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from visloc.control._checks import as_array, check_params, check_real, resolve_arm
+from visloc.control.design import ControllerGains, ControlSpecs, design_gains
+from visloc.control.linear import hover_input, to_pilot
+from visloc.model.params import ARDRONE2, ARDrone2Params
+from visloc.model.propulsion import PwmResult, mixer_matrix, pwm_from_inputs
+from visloc.types import FloatArray
+
+_POSITION_COLUMNS = np.r_[0:6, 12:16]  # x_P..w_P and the integrals: the "set-point" part
+
+
+def wrap_angle(angle: float) -> float:
+    """``angle`` (rad) wrapped to [-pi, pi)."""
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def _zone(value: tuple[float, float], name: str) -> FloatArray:
+    if not isinstance(value, (tuple, list)) or len(value) != 2:
+        raise ValueError(f"{name}: expected (position, heading), got {value!r}")
+    position = check_real(value[0], f"{name}[0]", positive=True)
+    heading = check_real(value[1], f"{name}[1]", positive=True)
+    return np.array([position] * 3 + [heading])
+
+
+class Controller:
+    """Full-state feedback with integral action for the AR.Drone 2.0 (report Figure 4.4).
+
+    Parameters
+    ----------
+    params : ARDrone2Params
+        Vehicle parameters (mass and g for the feed-forward, the mixer for :meth:`pwm`).
+    gains : ControllerGains, optional
+        Default :func:`visloc.control.design_gains` of ``params`` and ``specs``.
+    specs : ControlSpecs, optional
+        Loop specifications used when ``gains`` is not given.
+    arm : float, optional
+        Arm distance ``d`` of eq. (2.12), m, for the mixer (see
+        :func:`visloc.control.resolve_arm`; default ``params.arm``, else 0.125 m).
+    max_tilt : float
+        Bound on the roll/pitch torque that position, velocity and integrated position
+        errors may ask for, as the attitude it would hold against the attitude loop's
+        proportional gain, rad (report §4.4: "bound the control torques produced by large
+        set-point errors"). Default 0.35 rad (20 degrees); ``math.inf`` disables it.
+    max_thrust_change : float, optional
+        Bound on the thrust deviation from ``T0 = m g``, N; default ``0.5 m g``.
+    integral_zone, integral_rate_zone : (float, float)
+        An axis stops integrating while its error is beyond ``integral_zone`` (m, rad) *and*
+        it moves faster than ``integral_rate_zone`` (m/s, rad/s): position then heading.
+        Defaults (0.3 m, 0.3 rad) and (0.1 m/s, 0.1 rad/s).
+
+    Notes
+    -----
+    The integrators (pilot-frame x, y, z errors and the heading error, m s and rad s) are
+    there for steady-state errors (report §4.2.3). They stop on an axis whose bound is
+    active, or that is still travelling towards a distant set point (conditional
+    integration), so that set-point steps do not wind them up: with the default
+    specifications a 1 m side step overshoots by about 23 % when the integrators run all the
+    time and by about 7 % with the default zones (3 m: 19 % and 1 %). A steady offset,
+    however large, is still integrated away (its rate is zero): the measured spread of the
+    motors alone leaves metres of offset to a PD loop. The linear analysis
+    (:func:`visloc.control.vertex_check`) treats the integrators as always running.
+    """
+
+    def __init__(
+        self,
+        params: ARDrone2Params = ARDRONE2,
+        *,
+        gains: ControllerGains | None = None,
+        specs: ControlSpecs | None = None,
+        arm: float | None = None,
+        max_tilt: float = 0.35,
+        max_thrust_change: float | None = None,
+        integral_zone: tuple[float, float] = (0.3, 0.3),
+        integral_rate_zone: tuple[float, float] = (0.1, 0.1),
+    ) -> None:
+        self.params = check_params(params)
+        if gains is not None and not isinstance(gains, ControllerGains):
+            raise TypeError(f"gains: expected ControllerGains, got {type(gains).__name__}")
+        self.gains = design_gains(self.params, specs) if gains is None else gains
+        self.arm = resolve_arm(self.params, arm)
+        self.gamma = mixer_matrix(self.params, arm=self.arm)  # report eq. (2.12), mean c, d
+        self.K = self.gains.K(integral=True)
+        tilt = check_real(max_tilt, "max_tilt", positive=True, allow_inf=True)
+        self.torque_bound = np.array([self.gains.roll.kp, self.gains.pitch.kp]) * tilt
+        self.u0 = hover_input(self.params)  # report §4.2.2: T0 = m g feed-forward
+        dt_max = 0.5 * self.u0[0] if max_thrust_change is None else max_thrust_change
+        self.max_thrust_change = check_real(dt_max, "max_thrust_change", positive=True)
+        self.integral_zone = _zone(integral_zone, "integral_zone")
+        self.integral_rate_zone = _zone(integral_rate_zone, "integral_rate_zone")
+        self._integral = np.zeros(4)
+
+    @property
+    def integral(self) -> FloatArray:
+        """Integrated errors ``[x_P, y_P, z_P, psi]`` (4,), m s and rad s (a copy)."""
+        return self._integral.copy()
+
+    def reset(self) -> None:
+        """Zero the integrators."""
+        self._integral = np.zeros(4)
+
+    def error_state(self, state: ArrayLike, setpoint: ArrayLike) -> FloatArray:
+        """Pilot-frame error state (12,) of ``state`` with respect to ``setpoint``.
+
+        Parameters
+        ----------
+        state : array_like (12,)
+            Model state in the inertial NED frame A (:data:`visloc.model.STATE_NAMES`).
+        setpoint : array_like (4,)
+            ``[x, y, z, psi]``: position in A (m, z down) and heading (rad).
+
+        Returns
+        -------
+        ndarray (12,)
+            ``[R_psi^T (xi - xi_ref), R_psi^T nu, phi, theta, psi - psi_ref, p, q, r]`` with
+            the current heading ``psi`` (report eq. 4.1) and the heading error wrapped.
+        """
+        s = as_array(state, "state", (12,))
+        sp = as_array(setpoint, "setpoint", (4,))
+        x = to_pilot(s, s[8], origin=sp[:3])  # report eq. (4.1)
+        x[8] = wrap_angle(s[8] - sp[3])
+        return x
+
+    def _inputs(self, x: FloatArray, integral: FloatArray) -> tuple[FloatArray, FloatArray]:
+        xa = np.concatenate([x, integral])
+        du = -self.K @ xa  # report eq. (4.5): u = -K x
+        setpoint_part = -self.K[:, _POSITION_COLUMNS] @ xa[_POSITION_COLUMNS]
+        attitude_part = du - setpoint_part
+        bounded = np.clip(setpoint_part[1:3], -self.torque_bound, self.torque_bound)  # §4.4
+        clipped = np.zeros(4, bool)
+        clipped[[1, 0]] = bounded != setpoint_part[1:3]  # tau_x moves y, tau_y moves x
+        du[1:3] = attitude_part[1:3] + bounded
+        dt_limited = float(np.clip(du[0], -self.max_thrust_change, self.max_thrust_change))
+        clipped[2] = dt_limited != du[0]
+        du[0] = dt_limited
+        return self.u0 + du, clipped
+
+    def command(self, state: ArrayLike, setpoint: ArrayLike, dt: float) -> FloatArray:
+        """Advance the integrators by ``dt`` and return ``u = [T, tau_x, tau_y, tau_z]`` (4,).
+
+        Parameters
+        ----------
+        state : array_like (12,)
+            Estimated state in A (see :meth:`error_state`).
+        setpoint : array_like (4,)
+            ``[x, y, z, psi]`` in A, m and rad.
+        dt : float
+            Time since the previous call, s (>= 0; 0 leaves the integrators alone).
+
+        Returns
+        -------
+        ndarray (4,)
+            Thrust (N) and body torques (N m), feed-forward ``T0 = m g`` included.
+        """
+        step = check_real(dt, "dt", nonneg=True)
+        x = self.error_state(state, setpoint)
+        _, clipped = self._inputs(x, self._integral)
+        e = np.array([x[0], x[1], x[2], x[8]])
+        rate = np.array([x[3], x[4], x[5], x[11]])
+        moving = (np.abs(e) > self.integral_zone) & (np.abs(rate) > self.integral_rate_zone)
+        frozen = clipped | moving
+        self._integral = np.where(frozen, self._integral, self._integral + e * step)  # §4.2.3
+        u, _ = self._inputs(x, self._integral)
+        return u
+
+    def pwm(self, state: ArrayLike, setpoint: ArrayLike, dt: float) -> PwmResult:
+        """:meth:`command` turned into motor commands, ``pwm = sqrt(Gamma^-1 u) - k`` (eq. 4.6).
+
+        Parameters
+        ----------
+        state, setpoint, dt
+            As for :meth:`command`.
+
+        Returns
+        -------
+        PwmResult
+            Commands of motors 1-4 in percent, with saturation flags
+            (:func:`visloc.model.pwm_from_inputs`, using the mean-coefficient mixer).
+        """
+        u = self.command(state, setpoint, dt)
+        return pwm_from_inputs(u, self.params, gamma=self.gamma)  # report eq. (4.6)

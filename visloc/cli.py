@@ -152,7 +152,7 @@ def build_parser() -> argparse.ArgumentParser:
     tk.add_argument("--out", metavar="FILE.jsonl", help="write one JSON pose per frame")
     tk.add_argument("--udp", nargs="?", const="127.0.0.1:5005", metavar="HOST:PORT",
                     help="also send each JSON pose as a UDP datagram (default 127.0.0.1:5005)")
-    tk.add_argument("--fps", type=_positive, help="frame rate for image lists")
+    tk.add_argument("--fps", type=_positive, help="frame rate (required for image folders: the observer needs frame times)")
     tk.add_argument("--poles", type=float, nargs=2, default=(-4.0, -4.0), metavar="P",
                     help="velocity observer poles, 1/s (report eq. 3.14; default -4 -4)")
     tk.add_argument("--max-frames", type=_count, metavar="N", help="stop after N frames")

@@ -59,3 +59,16 @@ def test_render_map_makes_a_detectable_sheet(tmp_path):
     d0 = next(d for d in dets if d.id == 0)
     assert np.allclose(d0.corners[0] - 20, 0.02 * px_per_m - 0.5, atol=1.0)
     assert isinstance(MarkerMap.from_file(tmp_path / "ref.yml"), MarkerMap)
+
+
+def test_track_needs_fps_for_an_image_folder(tmp_path, capsys):
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    cv2.imwrite(str(frames / "f0.png"), np.zeros((48, 64), np.uint8))
+    BODY.to_file(tmp_path / "body.yml")
+    REFERENCE.to_file(tmp_path / "ref.yml")
+    write_camera_yml(tmp_path / "cam.yml", default_camera(SIZE), SIZE)
+    code = main(["track", str(frames), "--camera", str(tmp_path / "cam.yml"), "--body", str(tmp_path / "body.yml"),
+                 "--reference", str(tmp_path / "ref.yml"), "--quiet"])
+    assert code == 2
+    assert "--fps" in capsys.readouterr().err

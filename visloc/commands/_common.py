@@ -52,3 +52,15 @@ def camera_for(camera: Camera, shape: tuple[int, ...], warned: list[bool]) -> Ca
         warn("detect", f"camera file is for {camera.size[0]}x{camera.size[1]}, frames are {w}x{h}: scaling it")
         warned[0] = True
     return camera.scaled(w, h)
+
+
+def open_timed_source(stack, args: argparse.Namespace):
+    """Open ``args.source`` in ``stack`` for a command that needs real frame times (velocities):
+    image folders and globs carry no times, so they need ``--fps``."""
+    from visloc.cli import UsageError
+    from visloc.io import ImageListSource, open_source
+
+    source = stack.enter_context(open_source(args.source, fps=args.fps))
+    if isinstance(source, ImageListSource) and args.fps is None:
+        raise UsageError("image folders and globs need --fps (the time between frames)")
+    return source

@@ -11,8 +11,8 @@ import numpy as np
 from tqdm import tqdm
 
 from visloc.cli import UsageError
-from visloc.commands._common import camera_for, frames_of, warn
-from visloc.io import RerunLogger, open_source
+from visloc.commands._common import camera_for, frames_of, open_timed_source, warn
+from visloc.io import RerunLogger
 from visloc.pose import Camera
 
 
@@ -53,7 +53,7 @@ FLOW_COLUMNS = ["frame", "time", "source", "vx", "vy", "speed", "yaw_rate", "qua
 def flow(args: argparse.Namespace) -> int:
     """``visloc flow``: ground velocity and integrated track of a downward camera."""
     from visloc.flow import EgoMotion
-    from visloc.io import CsvWriter, ImageListSource
+    from visloc.io import CsvWriter
 
     camera = Camera.from_file(args.camera)
     heights = _read_heights(args.height_csv) if args.height_csv else None
@@ -61,9 +61,7 @@ def flow(args: argparse.Namespace) -> int:
     times: list[float] = []
     qualities: list[float] = []
     with ExitStack() as stack:
-        source = stack.enter_context(open_source(args.source, fps=args.fps))
-        if isinstance(source, ImageListSource) and args.fps is None:
-            raise UsageError("image folders and globs need --fps (the time between frames)")
+        source = open_timed_source(stack, args)
         out = stack.enter_context(CsvWriter(args.out, FLOW_COLUMNS)) if args.out else None
         rec = stack.enter_context(RerunLogger(args.rerun)) if args.rerun else None
         ego: EgoMotion | None = None

@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 
 from visloc.cli import UsageError
-from visloc.commands._common import camera_for, frames_of, warn
-from visloc.io import JsonlWriter, RerunLogger, open_source
+from visloc.commands._common import camera_for, frames_of, open_timed_source, warn
+from visloc.io import JsonlWriter, RerunLogger
 from visloc.markers import MarkerDetector
 from visloc.pose import Camera
 
@@ -74,7 +74,7 @@ def localize(args: argparse.Namespace) -> int:
     """``visloc localize``: the camera's position over a marker map per frame, filtered by a
     constant-velocity Kalman filter (filterpy) into position and velocity with uncertainty."""
     from visloc.estimation.kalman import PositionVelocityKF
-    from visloc.io import CsvWriter, ImageListSource
+    from visloc.io import CsvWriter
     from visloc.pose.map_pose import estimate_camera_pose
     from visloc.pose.maps import MarkerMap
 
@@ -90,9 +90,7 @@ def localize(args: argparse.Namespace) -> int:
     failed = n_frames = fixes = 0
     errors: list[float] = []
     with ExitStack() as stack:
-        source = stack.enter_context(open_source(args.source, fps=args.fps))
-        if isinstance(source, ImageListSource) and args.fps is None:
-            raise UsageError("image folders and globs need --fps (the time between frames)")
+        source = open_timed_source(stack, args)
         out = stack.enter_context(CsvWriter(args.out, LOCALIZE_COLUMNS)) if args.out else None
         rec = stack.enter_context(RerunLogger(args.rerun)) if args.rerun else None
         for frame in frames_of(source, args):
@@ -166,7 +164,7 @@ def track(args: argparse.Namespace) -> int:
     observer = None
     last_time = None
     with ExitStack() as stack:
-        source = stack.enter_context(open_source(args.source, fps=args.fps))
+        source = open_timed_source(stack, args)
         out = stack.enter_context(JsonlWriter(args.out)) if args.out else None
         sock = stack.enter_context(socket.socket(socket.AF_INET, socket.SOCK_DGRAM)) if target else None
         for frame in frames_of(source, args):

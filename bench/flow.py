@@ -20,7 +20,6 @@ plus velocity. Usage: ``python bench/flow.py [--quick] [--rounds 3]``; writes
 from __future__ import annotations
 
 import argparse
-import json
 import platform
 import sys
 import time
@@ -28,6 +27,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from _results import write_results
 
 from visloc.flow import block_flow, global_motion, ground_velocity
 from visloc.pose import Camera
@@ -175,12 +175,7 @@ def main(argv=None) -> int:
         res = run(size, n_flights, seconds, args.rounds, 10)
         res["still"] = still_frames(size)
         result["sizes"][key] = res
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "flow.json").write_text(json.dumps(result, indent=1))
-    md = markdown(result)
-    (out / "flow.md").write_text(md)
-    print(md)
+    write_results(args.out, "flow", result, markdown(result))
     return 0
 
 

@@ -18,13 +18,13 @@ position more than 5 cm off. Usage: ``python bench/localize.py [--quick]``; writ
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
 
 import cv2
 import numpy as np
+from _results import write_results
 from scipy.spatial.transform import Rotation
 
 from visloc.markers import MarkerDetector
@@ -163,12 +163,7 @@ def main(argv=None) -> int:
     n = 15 if args.quick else 100
     result = {"sets": {"grid clean": run(n, args.rounds, False), "grid hard": run(n, args.rounds, True)},
               "attitude": attitude(1.0 if args.quick else 10.0)}
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "localize.json").write_text(json.dumps(result, indent=1))
-    md = markdown(result)
-    (out / "localize.md").write_text(md)
-    print(md)
+    write_results(args.out, "localize", result, markdown(result))
     return 0
 
 

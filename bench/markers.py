@@ -25,6 +25,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from _results import write_results
 
 from visloc.markers import FAST_PASSES, MarkerDetector
 from visloc.pose import Camera, estimate_marker_pose, rotation_angle
@@ -324,12 +325,7 @@ def main(argv=None) -> int:
     print("real photographs ...", file=sys.stderr, flush=True)
     result["real"] = run_real(args.rounds)
     result["negatives"] = run_negatives()
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "markers.json").write_text(json.dumps(result, indent=1, default=_plain))
-    md = markdown(result)
-    (out / "markers.md").write_text(md)
-    print(md)
+    write_results(args.out, "markers", result, markdown(result), default=_plain)
     return 0
 
 

@@ -64,3 +64,18 @@ def open_timed_source(stack, args: argparse.Namespace):
     if isinstance(source, ImageListSource) and args.fps is None:
         raise UsageError("image folders and globs need --fps (the time between frames)")
     return source
+
+
+def read_columns(path: str, option: str, columns: tuple[str, ...]) -> dict[str, np.ndarray]:
+    """The named ``columns`` of the CSV at ``path`` (header row required), as 1-d float arrays;
+    a missing file or column is a :class:`visloc.cli.UsageError` naming ``option``."""
+    from visloc.cli import UsageError
+
+    try:
+        data = np.genfromtxt(path, delimiter=",", names=True)
+    except (OSError, ValueError) as exc:
+        raise UsageError(f"cannot read {option} {path}: {exc}") from None
+    if data.dtype.names is None or not set(columns) <= set(data.dtype.names):
+        names = ", ".join(columns[:-1]) + f" and {columns[-1]}"
+        raise UsageError(f"{option} {path} needs a header with {names} columns")
+    return {k: np.atleast_1d(data[k]) for k in columns}

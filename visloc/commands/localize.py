@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from visloc.cli import UsageError
-from visloc.commands._common import camera_for, frames_of, open_timed_source, warn
+from visloc.commands._common import camera_for, frames_of, open_timed_source, read_columns, warn
 from visloc.io import JsonlWriter, RerunLogger
 from visloc.markers import MarkerDetector
 from visloc.pose import Camera
@@ -49,26 +49,12 @@ def render_localize(args: argparse.Namespace) -> int:
 def _read_imu(path: str) -> np.ndarray:
     """(M, 4) ``t, fx, fy, fz`` (specific force in camera axes, m/s^2) from an IMU CSV with
     columns ``t,gx,gy,gz,fx,fy,fz`` (as ``visloc render localize`` writes), sorted by time."""
-    try:
-        data = np.genfromtxt(path, delimiter=",", names=True)
-    except (OSError, ValueError) as exc:
-        raise UsageError(f"cannot read --imu {path}: {exc}") from None
-    if data.dtype.names is None or not {"t", "fx", "fy", "fz"} <= set(data.dtype.names):
-        raise UsageError(f"--imu {path} needs a header with t, fx, fy and fz columns")
-    imu = np.column_stack([np.atleast_1d(data[k]) for k in ("t", "fx", "fy", "fz")])
+    cols = read_columns(path, "--imu", ("t", "fx", "fy", "fz"))
+    imu = np.column_stack([cols[k] for k in ("t", "fx", "fy", "fz")])
     imu = imu[np.isfinite(imu).all(axis=1)]
     if len(imu) == 0 or (np.diff(imu[:, 0]) <= 0).any():
         raise UsageError(f"--imu {path}: times must be finite and increasing")
     return imu
-
-def _read_truth(path: str) -> dict[str, np.ndarray]:
-    try:
-        data = np.genfromtxt(path, delimiter=",", names=True)
-    except (OSError, ValueError) as exc:
-        raise UsageError(f"cannot read --truth {path}: {exc}") from None
-    if data.dtype.names is None or not {"t", "x", "y", "z"} <= set(data.dtype.names):
-        raise UsageError(f"--truth {path} needs a header with t, x, y and z columns")
-    return {k: np.atleast_1d(data[k]) for k in ("t", "x", "y", "z")}
 
 def localize(args: argparse.Namespace) -> int:
     """``visloc localize``: the camera's position over a marker map per frame, filtered by a
@@ -81,7 +67,7 @@ def localize(args: argparse.Namespace) -> int:
     detector = MarkerDetector(args.dict)
     camera = Camera.from_file(args.camera)
     mmap = MarkerMap.from_file(args.map)
-    truth = _read_truth(args.truth) if args.truth else None
+    truth = read_columns(args.truth, "--truth", ("t", "x", "y", "z")) if args.truth else None
     imu = _read_imu(args.imu) if args.imu else None
     kf = PositionVelocityKF(3, model="cv", accel_noise=args.accel_noise)
     gravity = np.array([0.0, 0.0, -9.81])  # the map's z axis points up, out of the markers

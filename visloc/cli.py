@@ -166,6 +166,27 @@ def build_parser() -> argparse.ArgumentParser:
                     help="box half-width in standard deviations of c and d (default 3)")
     rb.add_argument("--json", action="store_true", help="print JSON instead of a table")
 
+    sm = sub.add_parser("sim", help="closed-loop simulation: model, sensors, visloc's estimators, controller")
+    sm.add_argument("scenario", choices=("hover", "sidestep", "push", "hover-vision"),
+                    help="hover 10 s; sidestep: 1 m in y (report Fig. 4.6); push: 4 N for 0.1 s "
+                         "(Fig. 4.5); hover-vision: 30 s on the marker-grid vision pipeline")
+    sm.add_argument("--seconds", type=_positive, help="simulated duration (default: the scenario's)")
+    sm.add_argument("--sigma", type=float, default=0.0, metavar="N",
+                    help="draw each motor's c, d at +-N standard deviations (signs from --seed; default 0)")
+    sm.add_argument("--seed", type=int, default=0, help="seed of motor signs, sensor noise, turbulence (default 0)")
+    sm.add_argument("--warmup", type=float, metavar="S",
+                    help="seconds of hover before t = 0 so the integrators absorb the motor spread "
+                         "(default 20 with --sigma > 0, else 0)")
+    sm.add_argument("--camera-rate", type=_positive, default=30.0, metavar="HZ",
+                    help="bottom-camera rate for hover-vision (default 30)")
+    sm.add_argument("--motor-lag", type=float, default=0.0, metavar="S",
+                    help="first-order motor time constant, s (report eq. 2.13; default 0)")
+    sm.add_argument("--out", metavar="RUN.csv", help="write time, state, estimate, set point, pwm per control step")
+    sm.add_argument("--plot", metavar="OUT.png", help="plot position, attitude and motor commands")
+    sm.add_argument("--rerun", metavar="OUT.rrd", help="write a rerun recording")
+    sm.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    sm.add_argument("--quiet", action="store_true", help="no progress bar")
+
     m = sub.add_parser("demo", help="render a few frames, detect markers and poses, print a table")
     m.add_argument("--out", default="visloc-demo", metavar="DIR", help="output folder (default ./visloc-demo)")
     m.add_argument("--frames", type=_count, default=6, help="number of frames (default 6)")
@@ -186,7 +207,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     run = {"detect": commands.detect, "render": commands.render, "demo": commands.demo,
            "flow": commands.flow, "track": commands.track, "localize": commands.localize,
-           "model": commands.model, "robust": commands.robust}[args.command]
+           "model": commands.model, "robust": commands.robust, "sim": commands.sim}[args.command]
     try:
         return run(args)
     except KeyboardInterrupt:

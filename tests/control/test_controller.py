@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from visloc.control import Controller, wrap_angle
+from visloc.control import Controller, ControlSpecs, LoopSpec, wrap_angle
 from visloc.model import ARDRONE2, derivatives, hover_pwm, mixer_matrix, pwm_bar
 
 P = ARDRONE2
@@ -67,9 +67,12 @@ def test_side_step_settles():
 
 
 def test_integrators_running_all_the_time_overshoot():
-    always = Controller(integral_zone=(1e9, 1e9))
-    log = simulate(always, [0.0, 1.0, 0.0, 0.0], 8.0)
-    assert np.max(log[:, 1]) > 1.15
+    sp = [0.0, 1.0, 0.0, 0.0]
+    always = simulate(Controller(integral_zone=(1e9, 1e9)), sp, 8.0)
+    conditional = simulate(Controller(), sp, 8.0)
+    over_always, over_conditional = np.max(always[:, 1]) - 1.0, np.max(conditional[:, 1]) - 1.0
+    assert over_always > 0.08  # windup on the step
+    assert over_always > 2.0 * max(over_conditional, 0.0)
 
 
 def test_bounded_torques_limit_the_roll_of_large_steps():
@@ -85,9 +88,14 @@ def test_integral_action_removes_the_motor_spread_offset():
     c = np.array(P.c_quad4)  # the measured motors of quadrotor 4 instead of the mean
     d = np.array(P.d_quad4)
     sp = [0.5, 0.0, -1.0, 0.3]
+    start = np.zeros(12)
+    start[2] = -1.0
+    no_integral = ControlSpecs(position=dataclasses.replace(ControlSpecs().position, integral=0.0),
+                               height=LoopSpec(3.0, 60.0), yaw=LoopSpec(3.0, 60.0))
+    pd = simulate(Controller(specs=no_integral), sp, 40.0, c=c, d=d, state=start)
+    assert abs(pd[-1, 0] - sp[0]) > 0.1 and abs(pd[-1, 8] - sp[3]) > 0.2  # PD alone: offsets
     ctrl = Controller()
-    log = simulate(ctrl, sp, 40.0, c=c, d=d)
-    assert np.max(np.abs(log[:, 0] - sp[0])) > 1.0  # the spread's pitch torque drifts it first
+    log = simulate(ctrl, sp, 40.0, c=c, d=d, state=start)
     np.testing.assert_allclose(log[-1, [0, 1, 2, 8]], sp, atol=0.02)
     assert np.any(np.abs(ctrl.integral) > 1e-3)
     ctrl.reset()

@@ -37,7 +37,8 @@ def test_measured_margins_meet_the_specs(gains, loop):
 
 def test_double_integrator_gains_in_closed_form(gains):
     # PD on 1/(J s^2) at crossover w with margin PM: kp = J w^2 cos PM, kd = J w sin PM
-    w, pm = 10.0, np.deg2rad(60.0)
+    spec = ControlSpecs().attitude
+    w, pm = spec.crossover, np.deg2rad(spec.phase_margin)
     assert gains.roll.kp == pytest.approx(P.Ixx * w**2 * np.cos(pm))
     assert gains.roll.kd == pytest.approx(P.Ixx * w * np.sin(pm))
     assert gains.roll.ki == 0.0 and gains.pitch.ki == 0.0
@@ -91,7 +92,8 @@ def test_specs_and_errors():
 def test_other_specs_scale_the_gains():
     slow = design_gains(P, ControlSpecs(attitude=LoopSpec(5.0, 60.0), position=LoopSpec(1.0, 50.0)))
     assert isinstance(slow, ControllerGains)
-    assert slow.roll.kp == pytest.approx(design_gains(P).roll.kp / 4)
+    ratio = (5.0 / ControlSpecs().attitude.crossover) ** 2  # kp = J w^2 cos PM
+    assert slow.roll.kp == pytest.approx(design_gains(P).roll.kp * ratio)
     assert loop_margins("position", gains=slow)[0] == pytest.approx(1.0)
 
 

@@ -11,5 +11,6 @@ from visloc.commands.localize import localize, track
 from visloc.commands.markers import detect, render
 from visloc.commands.model import model, model_summary
 from visloc.commands.robust import robust
+from visloc.commands.sim import sim
 
-__all__ = ["demo", "detect", "flow", "localize", "model", "model_summary", "render", "robust", "track"]
+__all__ = ["demo", "detect", "flow", "localize", "model", "model_summary", "render", "robust", "sim", "track"]

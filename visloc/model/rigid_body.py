@@ -131,17 +131,53 @@ def derivatives(
     p = check_params(params)
     if not isinstance(gyroscopic, bool):
         raise TypeError(f"gyroscopic: expected bool, got {type(gyroscopic).__name__}")
-    vel, lam, omega = s[3:6], s[6:9], s[9:12]
-    thrust, tau = u[0], u[1:]
-    R = rotation_matrix(lam)
-    acc = -R @ E3 * thrust / p.mass + p.g * E3  # report eq. (2.2) / (A.11)-(A.13)
-    lam_dot = euler_rate_matrix(lam) @ omega  # report eq. (2.3) / (A.8)-(A.10)
-    inertia = np.array([p.Ixx, p.Iyy, p.Izz])
-    moment = tau.copy()  # report eq. (A.14)-(A.16)
+    euler_rate_matrix(s[6:9])  # raises at the Z-Y-X singularity
+    return rhs(s, u, p.mass, p.g, np.array([p.Ixx, p.Iyy, p.Izz]), gyroscopic)
+
+
+def rhs(state: FloatArray, u: FloatArray, mass: float, g: float, inertia: FloatArray,
+        gyroscopic: bool = False) -> FloatArray:
+    """:func:`derivatives` without input checks, for integrators that call it many times.
+
+    Parameters
+    ----------
+    state : ndarray (12,)
+        As for :func:`derivatives` (finite, ``|theta| < pi / 2``: not checked).
+    u : ndarray (4,)
+        ``[T, tau_x, tau_y, tau_z]``, N and N m.
+    mass, g : float
+        kg and m/s^2.
+    inertia : ndarray (3,)
+        ``[Ixx, Iyy, Izz]``, kg m^2.
+    gyroscopic : bool
+        Include ``-omega x J omega`` (see :func:`derivatives`).
+
+    Returns
+    -------
+    ndarray (12,)
+    """
+    phi, theta, psi = state[6], state[7], state[8]
+    omega = state[9:12]
+    cf, sf = math.cos(phi), math.sin(phi)
+    ct, st = math.cos(theta), math.sin(theta)
+    cp, sp = math.cos(psi), math.sin(psi)
+    a = u[0] / mass
+    out = np.empty(12)
+    out[0:3] = state[3:6]  # report eq. (2.1) / (A.5)-(A.7)
+    # report eq. (2.2) / (A.11)-(A.13): -R e3 T / m + g e3, with R's third column (eq. 2.6)
+    out[3] = -(sf * sp + cf * cp * st) * a
+    out[4] = -(cf * st * sp - cp * sf) * a
+    out[5] = g - ct * cf * a
+    p, q, r = omega
+    tt = st / ct  # report eq. (2.3) / (A.8)-(A.10): lambda' = Q(lambda) omega, eq. (2.7)
+    out[6] = p + (sf * q + cf * r) * tt
+    out[7] = cf * q - sf * r
+    out[8] = (sf * q + cf * r) / ct
+    moment = u[1:4]  # report eq. (A.14)-(A.16)
     if gyroscopic:
-        moment -= np.cross(omega, inertia * omega)  # Euler's equation (report eq. 2.4, see above)
-    omega_dot = moment / inertia
-    return np.concatenate([vel, acc, lam_dot, omega_dot])  # report eq. (2.1) / (A.5)-(A.7)
+        moment = moment - np.cross(omega, inertia * omega)  # Euler's equation (see derivatives)
+    out[9:12] = moment / inertia
+    return out
 
 
 def motor_lag_derivative(pwm_bar: ArrayLike, pwm_bar_cmd: ArrayLike, tau_c: float) -> FloatArray:

@@ -1,0 +1,165 @@
+"""Closed-loop simulation benchmark: the scenarios of ``visloc sim`` on one core.
+
+- Every scenario with the default controller, nominal motors (``settling``, ``overshoot``,
+  ``height dip``, the linear model's figures) and the wall-clock speed as simulated seconds
+  per second (``realtime_factor``), pinned to one CPU core with OpenCV single-threaded.
+- ``hover-vision`` twice on the same seed: the vision front end is visloc's
+  (``MarkerDetector`` + ``estimate_camera_pose``) or OpenCV's route (``cv2.aruco.ArucoDetector``
+  with default parameters + ``cv2.solvePnP`` over all board corners), both into the same IMU
+  Kalman filter and controller: position RMS from the set point, estimate error, speed.
+- ``sidestep`` with the motors drawn at +-1 and +-2 sigma (4 seeds each).
+- ``--sweep``: the grid of position / attitude loop specifications that chose the defaults
+  of :class:`visloc.control.ControlSpecs` (side step and push on the non-linear model, the
+  256-vertex check at 2 sigma).
+
+Usage: ``python bench/sim.py [--quick] [--sweep]``; writes ``bench/results/sim.json`` and
+``sim.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import os
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+from _results import write_results
+
+from visloc.control import ControlSpecs, LoopSpec, design_gains, vertex_check
+from visloc.model import ARDRONE2
+from visloc.pose.maps import GridMap
+from visloc.sim import SIM_GRID, BottomCamera, simulate
+from visloc.types import Pose
+
+ROOT = Path(__file__).resolve().parents[1]
+P = replace(ARDRONE2, arm=0.125)
+
+
+def opencv_localizer():
+    """OpenCV's route as the vision front end: ArucoDetector (defaults) + solvePnP."""
+    camera = BottomCamera(GridMap(**SIM_GRID), "DICT_4X4_100")
+    grid, K = camera.marker_map, camera.K
+    det = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_100),
+                                  cv2.aruco.DetectorParameters())
+
+    def localize(image):
+        corners, ids, _ = det.detectMarkers(image)
+        if ids is None:
+            return None
+        keep = [(c, int(i)) for c, i in zip(corners, ids.ravel(), strict=True) if int(i) in grid]
+        if not keep:
+            return None
+        obj = np.concatenate([grid.corners_of(i) for _, i in keep])
+        img = np.concatenate([c.reshape(4, 2) for c, _ in keep]).astype(np.float64)
+        ok, rvec, tvec = cv2.solvePnP(obj, img, K, None, flags=cv2.SOLVEPNP_ITERATIVE)
+        if not ok:
+            return None
+        return Pose(cv2.Rodrigues(rvec)[0], tvec.ravel()), None
+
+    return localize
+
+
+def _row(name, r):
+    m = r.metrics
+    return {"run": name, "status": r.status.value, **{k: m.get(k) for k in (
+        "settling_time_s", "overshoot_pct", "height_dip_m", "position_rms_m", "estimate_rms_m",
+        "max_tilt_deg", "linear_settling_time_s", "linear_overshoot_pct", "linear_height_dip_m",
+        "vision_fixes", "camera_frames", "realtime_factor")}}
+
+
+def scenarios(quick: bool) -> list[dict]:
+    rows = []
+    for name in ("hover", "sidestep", "push"):
+        rows.append(_row(name, simulate(name)))
+        print(rows[-1], file=sys.stderr)
+    seconds = 10.0 if quick else None
+    for label, loc in (("hover-vision (visloc)", None), ("hover-vision (OpenCV front end)", opencv_localizer())):
+        rows.append(_row(label, simulate("hover-vision", seed=1, seconds=seconds, localizer=loc)))
+        print(rows[-1], file=sys.stderr)
+    for sigma in (1.0, 2.0):
+        for seed in range(1 if quick else 4):
+            rows.append(_row(f"sidestep sigma={sigma:g} seed={seed}", simulate("sidestep", sigma=sigma, seed=seed)))
+    return rows
+
+
+def sweep() -> list[dict]:
+    rows = []
+    for wa, wp, pm, ir in itertools.product([15, 20, 25], [2.5, 3, 3.5, 4], [45, 50, 55, 60], [0.05, 0.1]):
+        spec = ControlSpecs(attitude=LoopSpec(wa, 60.0), position=LoopSpec(wp, pm, ir))
+        try:
+            g = design_gains(P, spec)
+        except ValueError:
+            continue
+        s, pu = simulate("sidestep", gains=g).metrics, simulate("push", gains=g).metrics
+        vc = vertex_check(2.0, params=P, gains=g)
+        rows.append({"attitude": wa, "position": wp, "phase_margin": pm, "integral": ir,
+                     "settling_time_s": s["settling_time_s"], "overshoot_pct": s["overshoot_pct"],
+                     "height_dip_m": s["height_dip_m"], "push_settling_s": pu["settling_time_s"],
+                     "vertex_stable_2sigma": vc.vertex_stable, "max_real_eig": vc.max_real_eig})
+    return rows
+
+
+def _fmt(v, digits=3):
+    if v is None:
+        return "n/a"
+    if isinstance(v, float):
+        return f"{v:.{digits}g}"
+    return str(v)
+
+
+def markdown(result) -> str:
+    lines = [
+        "# Closed-loop simulation (`python bench/sim.py`)", "",
+        (f"One CPU core (affinity {result['cpus']}), OpenCV threads 1. Default controller "
+        "(`ControlSpecs()`), RK4 at 1 kHz, control and IMU at 200 Hz, bottom camera 320x240 at 30 Hz "
+        "over a 10 x 10 DICT_4X4_100 grid (hover-vision, light turbulence). Settling: 5 % band "
+        "(5 cm); height dip: largest height loss after the step or push."), "",
+        ("| run | status | settle s | overshoot % | height dip cm | pos RMS cm | est. RMS mm | fixes | "
+        "linear: settle s / overshoot % / dip cm | x real time |"),
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in result["scenarios"]:
+        dip = None if r["height_dip_m"] is None else 100 * r["height_dip_m"]
+        lin = "" if r["linear_overshoot_pct"] is None else (
+            f"{_fmt(r['linear_settling_time_s'])} / {_fmt(r['linear_overshoot_pct'])} / "
+            f"{_fmt(100 * r['linear_height_dip_m'])}")
+        fixes = "" if r["camera_frames"] is None else f"{r['vision_fixes']}/{r['camera_frames']}"
+        lines.append(
+            f"| {r['run']} | {r['status']} | {_fmt(r['settling_time_s'])} | {_fmt(r['overshoot_pct'])} | "
+            f"{_fmt(dip)} | {_fmt(100 * r['position_rms_m'])} | {_fmt(1000 * r['estimate_rms_m'])} | "
+            f"{fixes} | {lin} | {_fmt(r['realtime_factor'])} |")
+    if result.get("sweep"):
+        lines += ["", "## Specification sweep (side step, push, 256 vertices at 2 sigma)", "",
+                  ("| attitude rad/s | position rad/s | PM deg | integral | settle s | overshoot % | "
+                  "dip cm | push settle s | 2 sigma stable | max Re |"), "|---|---|---|---|---|---|---|---|---|---|"]
+        for r in result["sweep"]:
+            lines.append(
+                f"| {r['attitude']} | {r['position']} | {r['phase_margin']} | {r['integral']} | "
+                f"{_fmt(r['settling_time_s'])} | {_fmt(r['overshoot_pct'])} | {_fmt(100 * r['height_dip_m'])} | "
+                f"{_fmt(r['push_settling_s'])} | {r['vertex_stable_2sigma']} | {_fmt(r['max_real_eig'])} |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="10 s hover-vision, fewer motor draws")
+    ap.add_argument("--sweep", action="store_true", help="also sweep the loop specifications")
+    ap.add_argument("--out", default=str(ROOT / "bench" / "results"))
+    args = ap.parse_args(argv)
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+    cv2.setNumThreads(1)
+    result = {"cpus": sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None,
+              "scenarios": scenarios(args.quick)}
+    if args.sweep:
+        result["sweep"] = sweep()
+    write_results(args.out, "sim", result, markdown(result))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

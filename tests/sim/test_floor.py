@@ -1,0 +1,69 @@
+"""Marker maps printed on the floor and seen from the simulated bottom camera."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from visloc.markers import MarkerDetector
+from visloc.pose import Camera, GridMap, MarkerMap, estimate_camera_pose
+from visloc.sim import BottomCamera, Vehicle
+from visloc.synth.floor import FloorTexture
+from visloc.synth.grid import LOOKING_DOWN, render_map_view
+from visloc.types import Pose
+
+GRID = GridMap(4, 4, 0.10, 0.05)
+
+
+@pytest.fixture(scope="module")
+def floor():
+    return FloorTexture.from_map(GRID, "DICT_4X4_50")
+
+
+def test_floor_view_localises_to_the_true_pose(floor):
+    K = np.array([[320.0, 0, 159.5], [0, 320.0, 119.5], [0, 0, 1]])
+    det, cam = MarkerDetector("DICT_4X4_50"), Camera(K)
+    rng = np.random.default_rng(2)
+    centre = np.array([0.2875, -0.2875, 0.0])
+    for _ in range(5):
+        pos = centre + [*rng.uniform(-0.05, 0.05, 2), rng.uniform(0.6, 0.9)]
+        R = Rotation.from_rotvec(rng.normal(0, 0.08, 3)).as_matrix() @ LOOKING_DOWN
+        T = Pose(R.T, -R.T @ pos)
+        img = floor.render(K, (320, 240), T, noise_sigma=2.0, rng=rng)
+        fix = estimate_camera_pose(det.detect(img), GRID, cam)
+        assert fix is not None and len(fix.used) >= 4
+        assert np.linalg.norm(fix.position - pos) < 0.002
+        exact = render_map_view(GRID, K, (320, 240), T, "DICT_4X4_50").render.image
+        printed = (exact < 30) | (exact > 225)  # the exact renderer's marker print (grey elsewhere)
+        assert np.mean(np.abs(img[printed].astype(float) - exact[printed])) < 10.0
+
+
+def test_floor_errors(floor):
+    K = np.array([[320.0, 0, 159.5], [0, 320.0, 119.5], [0, 0, 1]])
+    below = Pose(LOOKING_DOWN.T, -LOOKING_DOWN.T @ np.array([0.3, -0.3, -0.5]))
+    with pytest.raises(ValueError, match="above the floor"):
+        floor.render(K, (320, 240), below)
+    c, s = np.cos(0.5), np.sin(0.5)  # a marker on a ramp, not on the floor
+    tilted = MarkerMap({0: np.array([[0, 0, 0], [0.1, 0, 0], [0.1, -0.1 * c, 0.1 * s], [0, -0.1 * c, 0.1 * s]])})
+    with pytest.raises(ValueError, match="z = 0"):
+        FloorTexture.from_map(tilted, "DICT_4X4_50")
+    with pytest.raises(ValueError, match="not in"):
+        FloorTexture.from_map(GridMap(8, 8, 0.1, 0.05), "DICT_4X4_50")
+
+
+def test_bottom_camera_pose_round_trip():
+    camera = BottomCamera(GRID, "DICT_4X4_50", noise_sigma=0.0)
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        s = np.zeros(12)
+        s[:3] = [*rng.uniform(-0.1, 0.1, 2), -1.0]
+        s[6:9] = rng.uniform(-0.3, 0.3, 3)
+        R = Vehicle(state=s).rotation()
+        position, R_back = camera.body_from_map(camera.pose(s, R))
+        np.testing.assert_allclose(position, s[:3], atol=1e-12)
+        np.testing.assert_allclose(R_back, R, atol=1e-12)
+    level = np.zeros(12)
+    level[2] = -1.0
+    T = camera.pose(level, np.eye(3))
+    # looking down from 1 m above the map centre; the image's top is the body's front (north)
+    np.testing.assert_allclose(T.R @ np.array([1.0, 0, 0]), [0, -1, 0], atol=1e-12)
+    np.testing.assert_allclose(-T.R.T @ T.t, camera.centre + [0, 0, 1.0], atol=1e-12)

@@ -1,0 +1,160 @@
+"""State estimators the simulated controller can fly on.
+
+- :class:`TruthEstimator`: the true state (the report's linear-design setting).
+- :class:`VisionEstimator`: visloc's own pipeline. Each bottom-camera image goes through
+  :class:`visloc.markers.MarkerDetector` and :func:`visloc.pose.estimate_camera_pose` (the
+  report's marker grid, §3.2.2); the camera-centre fix corrects a filterpy Kalman filter
+  (:class:`visloc.estimation.PositionVelocityKF`) that integrates the accelerometer, rotated
+  into the inertial frame, at the IMU rate. The attitude integrates the gyro (report eq. 2.3)
+  and is pulled towards the map pose's attitude at each fix, the complementary filter of
+  report eq. (3.4) with the vision angles in place of the accelerometer's (in flight the
+  accelerometer of a drag-free quadrotor only sees the thrust axis). The body rates are the
+  gyro's.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+from numpy.typing import NDArray
+
+from visloc.control._checks import as_array, check_real
+from visloc.estimation.kalman import PositionVelocityKF
+from visloc.markers.detector import MarkerDetector
+from visloc.model.rigid_body import euler_rate_matrix, rotation_matrix
+from visloc.pose.camera import Camera
+from visloc.pose.map_pose import estimate_camera_pose
+from visloc.pose.rotations import matrix_to_euler
+from visloc.sim.sensors import MAP_FROM_NED, BottomCamera
+from visloc.types import FloatArray, Pose
+
+__all__ = ["TruthEstimator", "VisionEstimator"]
+
+
+class TruthEstimator:
+    """Hands the controller the true state."""
+
+    name = "truth"
+
+    def __init__(self) -> None:
+        self.state = np.zeros(12)
+
+    def observe(self, state: FloatArray) -> None:
+        """Take the true ``state`` (12,)."""
+        self.state = state.copy()
+
+
+class VisionEstimator:
+    """Marker-map vision fused with the IMU (module docstring).
+
+    Parameters
+    ----------
+    camera : BottomCamera
+        The camera whose images :meth:`image` receives (map, intrinsics, frame conventions).
+    initial_state : array_like (12,)
+        The state the drone starts in (it is sitting still, known, before take-off).
+    g : float
+        Gravity, m/s^2.
+    attitude_gain : float
+        Crossover ``c`` (1/s) of the gyro / vision attitude complementary filter.
+    accel_std : float
+        Standard deviation of the accelerometer input per IMU sample, m/s^2 (the KF's ``Q``).
+    min_fix_std : float
+        Floor on the standard deviation of a vision position fix, m.
+    localizer : callable, optional
+        ``localizer(image) -> (T_cam_map, covariance) or None``: another vision front end
+        (e.g. OpenCV's ArUco route, for benchmarks); ``covariance`` (3, 3) of the camera
+        centre in the map frame, m^2, or None for ``fix_std``. Default: visloc's detector and
+        :func:`visloc.pose.estimate_camera_pose` with its propagated covariance.
+    fix_std : float
+        Standard deviation of a fix without covariance, m.
+
+    Attributes
+    ----------
+    fixes, misses : int
+        Images that gave a map pose, and images that did not.
+    last_fix_time : float
+        Time of the last fix, s.
+    """
+
+    name = "vision"
+
+    def __init__(self, camera: BottomCamera, initial_state: FloatArray, *, g: float = 9.81,
+                 attitude_gain: float = 5.0, accel_std: float = 0.3,
+                 min_fix_std: float = 0.002,
+                 localizer: Callable[[NDArray[np.uint8]], tuple[Pose, FloatArray | None] | None]
+                 | None = None, fix_std: float = 0.005) -> None:
+        if not isinstance(camera, BottomCamera):
+            raise TypeError(f"camera: expected BottomCamera, got {type(camera).__name__}")
+        s = as_array(initial_state, "initial_state", (12,))
+        self.camera = camera
+        self.detector = MarkerDetector(camera.dictionary)
+        self.intrinsics = Camera(camera.K)
+        self.g = check_real(g, "g", positive=True)
+        self.attitude_gain = check_real(attitude_gain, "attitude_gain", positive=True)
+        self.accel_std = check_real(accel_std, "accel_std", positive=True)
+        self.min_fix_std = check_real(min_fix_std, "min_fix_std", positive=True)
+        self.fix_std = check_real(fix_std, "fix_std", positive=True)
+        if localizer is not None and not callable(localizer):
+            raise TypeError(f"localizer: expected a callable, got {type(localizer).__name__}")
+        self.localizer = self._visloc_fix if localizer is None else localizer
+        self.kf = PositionVelocityKF(3, model="cv", initial_position=s[:3], initial_velocity=s[3:6],
+                                     initial_std=(0.01, 0.05), keep_history=False)
+        self.lam = s[6:9].copy()
+        self.omega = s[9:12].copy()
+        self.fixes = 0
+        self.misses = 0
+        self.last_fix_time = 0.0
+        self._t = 0.0
+
+    @property
+    def state(self) -> FloatArray:
+        """The estimate (12,) in the model's state order."""
+        return np.concatenate([self.kf.position, self.kf.velocity, self.lam, self.omega])
+
+    def imu(self, t: float, gyro: FloatArray, accel: FloatArray) -> None:
+        """Propagate to time ``t`` with one IMU sample (body rates rad/s, specific force m/s^2)."""
+        dt = t - self._t
+        self._t = t
+        if dt > 0.0:
+            self.lam = self.lam + euler_rate_matrix(self.lam) @ gyro * dt  # report eq. (2.3)
+        self.omega = np.asarray(gyro, dtype=float)
+        a = rotation_matrix(self.lam) @ accel + np.array([0.0, 0.0, self.g])  # inertial, NED
+        self.kf.predict(t, accel=a, accel_std=self.accel_std)  # x = F x + B a
+
+    def _visloc_fix(self, image: NDArray[np.uint8]) -> tuple[Pose, FloatArray | None] | None:
+        fix = estimate_camera_pose(self.detector.detect(image), self.camera.marker_map,
+                                   self.intrinsics)
+        return None if fix is None else (fix.pose, fix.position_covariance)
+
+    def image(self, t: float, image: NDArray[np.uint8], dt: float) -> bool:
+        """Correct with one bottom-camera image taken at ``t``, ``dt`` after the previous one.
+
+        Returns
+        -------
+        bool
+            Whether the image gave a map pose that the filter accepted.
+        """
+        fix = self.localizer(image)
+        if fix is None:
+            self.misses += 1
+            return False
+        T_cam_map, cov = fix
+        position, R = self.camera.body_from_map(T_cam_map)
+        error = matrix_to_euler(R) - self.lam
+        error = (error + math.pi) % (2.0 * math.pi) - math.pi
+        self.lam = self.lam + (1.0 - math.exp(-self.attitude_gain * dt)) * error  # report eq. (3.4)
+        floor = self.min_fix_std**2 * np.eye(3)
+        if cov is None:
+            R_fix = max(self.fix_std, self.min_fix_std) ** 2 * np.eye(3)
+        else:
+            R_fix = MAP_FROM_NED @ cov @ MAP_FROM_NED + floor
+        used = self.kf.update_position(position, R=R_fix)
+        if used:
+            self.fixes += 1
+            self.last_fix_time = t
+        else:
+            self.misses += 1
+        return used

@@ -1,0 +1,402 @@
+"""The closed loop: vehicle, sensors, estimator, controller in turn (report Figure 4.4).
+
+:func:`simulate` integrates the non-linear model (:class:`visloc.sim.Vehicle`, RK4 at ``dt``)
+with motor commands from :class:`visloc.control.Controller` at ``control_rate``; the
+controller flies on the estimate of :mod:`visloc.sim.estimators` (the true state, or visloc's
+marker-grid vision fused with the IMU, the bottom camera ticking at ``camera_rate``). It
+returns stacked arrays and an exit status with a readable reason (:class:`SimStatus`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from enum import Enum
+
+import numpy as np
+from scipy.linalg import expm
+
+from visloc.control._checks import check_params, check_real, resolve_arm
+from visloc.control.controller import Controller
+from visloc.control.design import ControllerGains, ControlSpecs, augmented_model
+from visloc.model.params import ARDRONE2, ARDrone2Params
+from visloc.model.propulsion import hover_pwm
+from visloc.pose.maps import GridMap
+from visloc.sim.estimators import TruthEstimator, VisionEstimator
+from visloc.sim.scenarios import Scenario, get_scenario
+from visloc.sim.sensors import BottomCamera, Imu
+from visloc.sim.vehicle import Vehicle, motor_coefficients
+from visloc.types import FloatArray
+
+__all__ = ["SIM_GRID", "SimResult", "SimStatus", "linear_step_response", "simulate"]
+
+SIM_GRID = {"rows": 10, "cols": 10, "marker_length": 0.10, "spacing": 0.05}
+"""The floor grid of the vision scenarios (DICT_4X4_100), as ``visloc render localize``'s."""
+
+CRASH_TILT = math.radians(80.0)
+"""Roll or pitch beyond which the drone counts as crashed (it cannot recover)."""
+
+VISION_TIMEOUT = 1.0
+"""Seconds without a vision fix after which a vision run counts as diverged."""
+
+WARMUP_SECONDS = 20.0
+"""Default hover before t = 0 with spread motors (``simulate(warmup=...)``), s."""
+
+LINEAR_SECONDS = 20.0
+"""Shortest time the linear counterpart of a step is run for (its integrators never stop)."""
+
+FAR = 20.0
+"""Distance from the set point (m) beyond which a run counts as diverged."""
+
+
+class SimStatus(str, Enum):
+    """How a run ended."""
+
+    SETTLED = "settled"
+    """Ran to the end and stayed in the settling band from ``settling_time_s`` on."""
+    COMPLETED = "completed"
+    """Ran to the end without settling into the band."""
+    CRASHED = "crashed"
+    """Hit the floor or tipped over."""
+    DIVERGED = "diverged"
+    """The state blew up, drifted away, or the estimator lost track."""
+
+
+@dataclass(frozen=True, eq=False)
+class SimResult:
+    """A closed-loop run, sampled at the control rate.
+
+    Attributes
+    ----------
+    scenario : str
+    status : SimStatus
+    reason : str
+        Why the run ended as it did, in words.
+    t : ndarray (N,)
+        Times, s.
+    state, estimate : ndarray (N, 12)
+        True and estimated state (:data:`visloc.model.STATE_NAMES`).
+    setpoint : ndarray (N, 4)
+        ``[x, y, z, psi]``.
+    pwm : ndarray (N, 4)
+        Motor commands, percent.
+    saturated : ndarray (N,) bool
+        Whether the requested inputs were out of the motors' reach (eq. 4.6 clipped).
+    metrics : dict
+        ``settling_time_s``, ``overshoot_pct``, ``position_rms_m``, ``height_dip_m``,
+        ``estimate_rms_m``, ``max_tilt_deg``, ``saturated_fraction``, ``realtime_factor``,
+        and for vision runs ``camera_frames``, ``vision_fixes``, ``vision_misses``; for step
+        scenarios the linear model's ``linear_settling_time_s``, ``linear_overshoot_pct``,
+        ``linear_height_dip_m`` (see :func:`simulate`).
+    motors : dict
+        The simulated motors' ``c`` and ``d`` (the controller uses the means).
+    """
+
+    scenario: str
+    status: SimStatus
+    reason: str
+    t: FloatArray
+    state: FloatArray
+    estimate: FloatArray
+    setpoint: FloatArray
+    pwm: FloatArray
+    saturated: np.ndarray
+    metrics: dict = field(default_factory=dict)
+    motors: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        """JSON-ready summary (no arrays): the fields ``visloc sim --json`` prints."""
+        out = {"scenario": self.scenario, "status": self.status.value, "reason": self.reason,
+               "seconds": float(self.t[-1]) if len(self.t) else 0.0}
+        out.update(self.metrics)
+        out["motors"] = self.motors
+        return out
+
+
+def _settling(t: FloatArray, error: FloatArray, band: float, t0: float) -> float | None:
+    """Time after ``t0`` from which ``|error| <= band`` to the end; None if it never is."""
+    after = t >= t0
+    outside = after & (np.abs(error) > band)
+    if not np.any(after) or abs(error[-1]) > band:
+        return None
+    if not np.any(outside):
+        return 0.0
+    last = int(np.flatnonzero(outside)[-1])
+    return float(t[min(last + 1, len(t) - 1)] - t0)
+
+
+def linear_step_response(gains: ControllerGains, params: ARDrone2Params, step: FloatArray,
+                         seconds: float, dt: float = 0.005) -> tuple[FloatArray, FloatArray]:
+    """Set-point step of the *linear* closed loop ``x' = (A - B K) x`` (report eqs. 4.4-4.5).
+
+    Parameters
+    ----------
+    gains : ControllerGains
+    params : ARDrone2Params
+    step : ndarray (4,)
+        Set-point change ``[dx, dy, dz, dpsi]``: the error state starts at ``-step``.
+    seconds, dt : float
+        Duration and sample time, s.
+
+    Returns
+    -------
+    t : ndarray (N,)
+    position : ndarray (N, 3)
+        Position relative to the old set point, A frame (NED), m.
+    """
+    a, b = augmented_model(params)
+    a_cl = a - b @ gains.K(integral=True)  # report eq. (4.5): u = -K x
+    x = np.zeros(16)
+    x[0:3] = -step[:3]
+    x[8] = -step[3]
+    phi = expm(a_cl * dt)
+    n = round(seconds / dt) + 1
+    out = np.empty((n, 3))
+    for i in range(n):
+        out[i] = x[0:3] + step[:3]
+        x = phi @ x
+    return np.arange(n) * dt, out
+
+
+def _check_rate(value: float, name: str) -> float:
+    return check_real(value, name, positive=True)
+
+
+def simulate(
+    scenario: str | Scenario,
+    *,
+    params: ARDrone2Params = ARDRONE2,
+    sigma: float = 0.0,
+    seed: int = 0,
+    arm: float | None = None,
+    specs: ControlSpecs | None = None,
+    gains: ControllerGains | None = None,
+    seconds: float | None = None,
+    dt: float = 0.001,
+    control_rate: float = 200.0,
+    camera_rate: float = 30.0,
+    motor_lag: float = 0.0,
+    progress: Callable[[float], None] | None = None,
+    localizer: Callable | None = None,
+    warmup: float | None = None,
+) -> SimResult:
+    """Fly ``scenario`` in closed loop on the non-linear model.
+
+    Parameters
+    ----------
+    scenario : str or Scenario
+        A name from :data:`visloc.sim.SCENARIOS` or a :class:`Scenario`.
+    params : ARDrone2Params
+        The vehicle (its mean motor coefficients are what the controller knows).
+    sigma : float
+        Draw each motor's ``c_i, d_i`` at ``+- sigma`` standard deviations from the mean
+        (signs from ``seed``; :func:`visloc.sim.motor_coefficients`); 0: nominal motors.
+    seed : int
+        Seeds the motor signs, the sensor noise and the turbulence.
+    arm : float, optional
+        Arm distance of eq. (2.12), m (:func:`visloc.control.resolve_arm`).
+    specs, gains : optional
+        Controller design (default :func:`visloc.control.design_gains` of the defaults).
+    seconds : float, optional
+        Override the scenario's duration.
+    dt : float
+        RK4 step of the vehicle, s.
+    control_rate, camera_rate : float
+        Controller / IMU rate and bottom-camera rate, Hz.
+    motor_lag : float
+        First-order motor time constant (report eq. 2.13), s; 0 as in the report's model.
+    progress : callable, optional
+        Called with the simulated time after each simulated second.
+    localizer : callable, optional
+        Vision front end of the ``"vision"`` estimator (see :class:`VisionEstimator`);
+        default visloc's detector and map localiser.
+    warmup : float, optional
+        Seconds of hover on the true state before t = 0, not recorded (the report's take-off
+        before its side steps): the integrators absorb the motors' spread first. Default
+        :data:`WARMUP_SECONDS` when ``sigma > 0``, else 0.
+
+    Returns
+    -------
+    SimResult
+
+    Notes
+    -----
+    Metrics (``None`` where they do not apply): ``settling_time_s`` is the time after the step
+    or push (after t = 0 for a hover) from which the position error stays within the
+    scenario's band (5 % of a step, else 5 cm); ``overshoot_pct`` the travel beyond a step's
+    target in % of the step; ``position_rms_m`` the RMS distance from the set point over the
+    whole run; ``height_dip_m`` the largest height loss below the set point after the step
+    or push; ``estimate_rms_m`` the RMS distance between estimated and true position;
+    ``realtime_factor`` simulated seconds per wall-clock second.
+    """
+    sc = get_scenario(scenario) if isinstance(scenario, str) else scenario
+    if not isinstance(sc, Scenario):
+        raise TypeError(f"scenario: expected a name or Scenario, got {type(scenario).__name__}")
+    p = check_params(params)
+    p = replace(p, arm=resolve_arm(p, arm))
+    duration = sc.seconds if seconds is None else check_real(seconds, "seconds", positive=True)
+    h = _check_rate(dt, "dt")
+    ctrl_dt = 1.0 / _check_rate(control_rate, "control_rate")
+    substeps = max(1, round(ctrl_dt / h))
+    h = ctrl_dt / substeps
+    cam_dt = 1.0 / _check_rate(camera_rate, "camera_rate")
+    rng = np.random.default_rng(seed)
+    c, d = motor_coefficients(p, sigma, seed=seed)
+    start = sc.start_setpoint
+    initial = np.zeros(12)
+    initial[0:3], initial[8] = start[:3], start[3]
+    vehicle = Vehicle(p, c=c, d=d, motor_lag=motor_lag, state=initial)
+    vehicle.trim(np.full(4, hover_pwm(p)))
+    controller = Controller(p, gains=gains, specs=specs)
+    lead = (WARMUP_SECONDS if sigma > 0 else 0.0) if warmup is None else check_real(
+        warmup, "warmup", nonneg=True)
+    for _ in range(round(lead / ctrl_dt)):  # hover on the true state: the integrators settle
+        cmd = controller.pwm(vehicle.state, start, ctrl_dt)
+        for _ in range(substeps):
+            vehicle.step(cmd.pwm, h)
+    initial = vehicle.state.copy()
+    imu = Imu(rng=rng)
+    camera = None
+    if sc.estimator == "vision":
+        camera = BottomCamera(GridMap(**SIM_GRID), "DICT_4X4_100", rng=rng)
+        estimator: TruthEstimator | VisionEstimator = VisionEstimator(camera, initial, g=p.g,
+                                                                      localizer=localizer)
+    elif sc.estimator == "truth":
+        estimator = TruthEstimator()
+    else:
+        raise ValueError(f"scenario.estimator: expected 'truth' or 'vision', got {sc.estimator!r}")
+    n = round(duration / ctrl_dt) + 1
+    t_out = np.arange(n) * ctrl_dt
+    states, estimates = np.full((n, 12), np.nan), np.full((n, 12), np.nan)
+    setpoints, pwms = np.full((n, 4), np.nan), np.full((n, 4), np.nan)
+    saturated = np.zeros(n, bool)
+    gust = np.zeros(3)
+    gust_a = math.exp(-2.0 * math.pi * 1.0 * ctrl_dt)  # 1 Hz low-pass turbulence
+    next_frame, frames = 0.0, 0
+    status, reason = None, ""
+    wall = time.perf_counter()
+    k = 0
+    for k in range(n):
+        t = k * ctrl_dt
+        s = vehicle.state
+        force = sc.force(t)
+        if sc.gust_std > 0.0:
+            gust = gust_a * gust + math.sqrt(1 - gust_a**2) * sc.gust_std * rng.normal(size=3)
+            gust[2] = 0.0
+            force = gust if force is None else force + gust
+        R = vehicle.rotation()
+        try:
+            if isinstance(estimator, VisionEstimator):
+                gyro, accel = imu.sample(s, R, vehicle.acceleration(force), p.g)
+                estimator.imu(t, gyro, accel)
+                if t + 1e-9 >= next_frame:
+                    estimator.image(t, camera.capture(s, R), cam_dt)  # type: ignore[union-attr]
+                    frames += 1
+                    next_frame += cam_dt
+                if t - estimator.last_fix_time > VISION_TIMEOUT:
+                    status, reason = SimStatus.DIVERGED, (
+                        f"vision lost: no marker-map fix for {VISION_TIMEOUT:g} s at t = {t:.2f} s")
+            else:
+                estimator.observe(s)
+        except ValueError as exc:  # the camera's view left the printed floor
+            status, reason = SimStatus.DIVERGED, f"vision lost at t = {t:.2f} s: {exc}"
+        sp = sc.setpoint(t)
+        cmd = controller.pwm(estimator.state, sp, ctrl_dt)  # report eqs. (4.5)-(4.6)
+        states[k], estimates[k], setpoints[k], pwms[k] = s, estimator.state, sp, cmd.pwm
+        saturated[k] = cmd.saturated
+        if status is not None:
+            break
+        if s[2] > -p.cog_height:
+            status, reason = SimStatus.CRASHED, f"hit the floor at t = {t:.2f} s"
+        elif max(abs(s[6]), abs(s[7])) > CRASH_TILT:
+            status, reason = SimStatus.CRASHED, (
+                f"tipped over at t = {t:.2f} s (roll {math.degrees(s[6]):.0f} deg, "
+                f"pitch {math.degrees(s[7]):.0f} deg)")
+        elif np.linalg.norm(s[:3] - sp[:3]) > FAR:
+            status, reason = SimStatus.DIVERGED, f"drifted {FAR:g} m from the set point at t = {t:.2f} s"
+        if status is not None or k == n - 1:
+            break
+        try:
+            for _ in range(substeps):
+                vehicle.step(cmd.pwm, h, force)
+        except FloatingPointError as exc:
+            status, reason = SimStatus.DIVERGED, str(exc)
+            break
+        if progress is not None and int((k + 1) * ctrl_dt) != int(k * ctrl_dt):
+            progress((k + 1) * ctrl_dt)
+    wall = time.perf_counter() - wall
+    m = k + 1
+    t_out, states, estimates = t_out[:m], states[:m], estimates[:m]
+    setpoints, pwms, saturated = setpoints[:m], pwms[:m], saturated[:m]
+    metrics = _metrics(sc, t_out, states, estimates, setpoints, saturated, wall)
+    if isinstance(estimator, VisionEstimator):
+        metrics.update(camera_frames=frames, vision_fixes=estimator.fixes,
+                       vision_misses=estimator.misses)
+    if sc.step is not None:
+        metrics.update(_linear_metrics(controller.gains, p, sc, duration))
+    if status is None:
+        settle = metrics["settling_time_s"]
+        if settle is not None:
+            status, reason = SimStatus.SETTLED, (
+                f"within {sc.band * 100:.0f} cm of the set point from {settle:.2f} s on")
+        else:
+            status, reason = SimStatus.COMPLETED, (
+                f"ran {duration:g} s; ended {metrics['final_error_m'] * 100:.1f} cm from the set "
+                f"point (band {sc.band * 100:.0f} cm)")
+    motors = {"c": [float(v) for v in c], "d": [float(v) for v in d], "sigma": float(sigma)}
+    return SimResult(sc.name, status, reason, t_out, states, estimates, setpoints, pwms,
+                     saturated, metrics, motors)
+
+
+def _event_time(sc: Scenario) -> float:
+    if sc.step is not None:
+        return sc.step[0]
+    if sc.push is not None:
+        return sc.push[0]
+    return 0.0
+
+
+def _metrics(sc: Scenario, t: FloatArray, states: FloatArray, estimates: FloatArray,
+             setpoints: FloatArray, saturated: np.ndarray, wall: float) -> dict:
+    err = states[:, :3] - setpoints[:, :3]
+    dist = np.linalg.norm(err, axis=1)
+    t0 = _event_time(sc)
+    after = t >= t0
+    settle = _settling(t, dist, sc.band, t0)
+    overshoot = None
+    if sc.step is not None:
+        start = sc.start_setpoint[:3]
+        delta = sc.step[1][:3] - start
+        size = float(np.linalg.norm(delta))
+        travel = (states[after, :3] - start) @ (delta / size)
+        overshoot = float(max(0.0, travel.max() - size) / size * 100.0)
+    dip = float(np.max(err[after, 2])) if np.any(after) else 0.0  # NED: + is below
+    tilt = np.degrees(np.max(np.abs(states[:, 6:8])))
+    return {
+        "settling_time_s": settle,
+        "overshoot_pct": overshoot,
+        "position_rms_m": float(np.sqrt(np.mean(dist**2))),
+        "final_error_m": float(dist[-1]),
+        "height_dip_m": max(dip, 0.0),
+        "estimate_rms_m": float(np.sqrt(np.mean(np.sum((estimates[:, :3] - states[:, :3]) ** 2, 1)))),
+        "max_tilt_deg": float(tilt),
+        "saturated_fraction": float(np.mean(saturated)),
+        "realtime_factor": float(t[-1] / wall) if wall > 0 else math.inf,
+    }
+
+
+def _linear_metrics(gains: ControllerGains, p: ARDrone2Params, sc: Scenario, seconds: float) -> dict:
+    """The same step on the linear closed loop: no height dip there (report §4.4)."""
+    assert sc.step is not None
+    delta = sc.step[1] - sc.start_setpoint
+    t, pos = linear_step_response(gains, p, delta, max(seconds - sc.step[0], LINEAR_SECONDS))
+    size = float(np.linalg.norm(delta[:3]))
+    err = np.linalg.norm(pos - delta[:3], axis=1)
+    travel = pos @ (delta[:3] / size)
+    return {
+        "linear_settling_time_s": _settling(t, err, sc.band, 0.0),
+        "linear_overshoot_pct": float(max(0.0, travel.max() - size) / size * 100.0),
+        "linear_height_dip_m": float(max(0.0, np.max(pos[:, 2] - delta[2]))),
+    }

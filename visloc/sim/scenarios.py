@@ -1,0 +1,87 @@
+"""The closed-loop scenarios of ``visloc sim`` (report §4.4, Figures 4.5-4.6)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from visloc.types import FloatArray
+
+__all__ = ["SCENARIOS", "Scenario", "get_scenario"]
+
+HOVER_HEIGHT = 1.0
+"""Height of every scenario's hover point above the floor, m (NED ``z = -1``)."""
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One closed-loop experiment.
+
+    Attributes
+    ----------
+    name : str
+    description : str
+    seconds : float
+        Simulated duration, s.
+    step : (float, ndarray (4,)) or None
+        ``(time s, set point [x, y, z, psi])`` switched to at that time; the start set point
+        is the hover point ``[0, 0, -HOVER_HEIGHT, 0]``.
+    push : (float, float, ndarray (3,)) or None
+        ``(start s, duration s, force N in A)``: a push on the CoG (report Figure 4.5).
+    estimator : str
+        ``"truth"`` or ``"vision"`` (:mod:`visloc.sim.estimators`).
+    gust_std : float
+        Standard deviation of a random horizontal force (N), low-passed at 1 Hz: air turbulence.
+    band : float
+        Settling band, m: 5 % of a step, or an absolute tolerance without one.
+    """
+
+    name: str
+    description: str
+    seconds: float
+    step: tuple[float, FloatArray] | None = None
+    push: tuple[float, float, FloatArray] | None = None
+    estimator: str = "truth"
+    gust_std: float = 0.0
+    band: float = 0.05
+
+    @property
+    def start_setpoint(self) -> FloatArray:
+        """``[x, y, z, psi]`` at t = 0."""
+        return np.array([0.0, 0.0, -HOVER_HEIGHT, 0.0])
+
+    def setpoint(self, t: float) -> FloatArray:
+        """``[x, y, z, psi]`` at time ``t``."""
+        if self.step is not None and t >= self.step[0]:
+            return self.step[1]
+        return self.start_setpoint
+
+    def force(self, t: float) -> FloatArray | None:
+        """The push force on the CoG at ``t`` (N, A frame), or None."""
+        if self.push is not None and self.push[0] <= t < self.push[0] + self.push[1]:
+            return self.push[2]
+        return None
+
+
+SCENARIOS: dict[str, Scenario] = {
+    s.name: s
+    for s in (
+        Scenario("hover", "hold 1 m above the floor for 10 s", 10.0),
+        Scenario("sidestep", "a 1 m side step in y from hover at t = 1 s (report Figure 4.6)", 6.0,
+                 step=(1.0, np.array([0.0, 1.0, -HOVER_HEIGHT, 0.0]))),
+        Scenario("push", "a 4 N sideways push for 0.1 s at t = 1 s (report Figure 4.5)", 6.0,
+                 push=(1.0, 0.1, np.array([0.0, 4.0, 0.0]))),
+        Scenario("hover-vision", "30 s hover in light turbulence on visloc's marker-grid vision: "
+                 "each bottom-camera frame goes through the detector and the map localiser",
+                 30.0, estimator="vision", gust_std=0.05),
+    )
+}
+"""The scenarios by name."""
+
+
+def get_scenario(name: str) -> Scenario:
+    """The scenario called ``name``; ``ValueError`` listing the known ones otherwise."""
+    if name not in SCENARIOS:
+        raise ValueError(f"scenario: expected one of {sorted(SCENARIOS)}, got {name!r}")
+    return SCENARIOS[name]

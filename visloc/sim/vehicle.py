@@ -1,0 +1,187 @@
+"""The simulated AR.Drone 2.0: motors, propulsion and the non-linear rigid body, integrated by RK4.
+
+Each motor ``i`` turns its command ``pwm_i`` (percent, saturated to ``[0, 100]``) into
+``T_i = c_i (pwm_i + k)^2`` and ``tau_i = d_i (pwm_i + k)^2`` (report eqs. 2.15-2.18) with its
+*own* coefficients ``c_i, d_i``: the controller only knows their mean, so the spread of the
+motors acts on the loop as it does on the real drone (report §4.3). An optional first-order
+lag (eq. 2.13) sits between the command and the squared term. The rigid body is the model of
+:func:`visloc.model.derivatives` (NED, Z-Y-X Euler angles, eqs. 2.1-2.8), with an optional
+external force (a push, report Figure 4.5) in the inertial frame.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from visloc.control._checks import as_array, check_params, check_real, resolve_arm
+from visloc.model.params import ARDRONE2, ARDrone2Params
+from visloc.model.propulsion import mixer_matrix, pwm_bar
+from visloc.model.rigid_body import rhs, rotation_matrix
+from visloc.types import FloatArray
+
+__all__ = ["Vehicle", "motor_coefficients"]
+
+
+def motor_coefficients(params: ARDrone2Params, n_sigma: float = 0.0, *,
+                       seed: int | None = 0) -> tuple[FloatArray, FloatArray]:
+    """Thrust and torque coefficients of motors 1-4 at ``+- n_sigma`` standard deviations.
+
+    Parameters
+    ----------
+    params : ARDrone2Params
+        Supplies ``c_mean, c_std, d_mean, d_std`` (report Table 2.3).
+    n_sigma : float
+        Distance of each coefficient from its mean in standard deviations (>= 0); 0 gives the
+        nominal (mean) motors.
+    seed : int or None
+        Chooses the sign of each of the eight deviations (a vertex of the report's polytope,
+        §4.3); None gives the worst-looking vertex for roll: motors 1 and 4 (left) strong,
+        2 and 3 (right) weak, and the yaw torques of motors 1 and 3 strong.
+
+    Returns
+    -------
+    c, d : ndarray (4,)
+        N/%^2 and N m/%^2.
+    """
+    p = check_params(params)
+    n = check_real(n_sigma, "n_sigma", nonneg=True)
+    if seed is None:
+        sc = np.array([1.0, -1.0, -1.0, 1.0])
+        sd = np.array([1.0, -1.0, 1.0, -1.0])
+    else:
+        signs = np.random.default_rng(seed).choice([-1.0, 1.0], size=8)
+        sc, sd = signs[:4], signs[4:]
+    c = p.c_mean + n * p.c_std * sc  # report eq. (4.16): c_i = c_mean +- n sigma_c
+    d = p.d_mean + n * p.d_std * sd
+    if np.any(c <= 0) or np.any(d <= 0):
+        raise ValueError(f"n_sigma: {n} standard deviations give a non-positive coefficient")
+    return c, d
+
+
+class Vehicle:
+    """The non-linear quadrotor with per-motor propulsion, integrated by fixed-step RK4.
+
+    Parameters
+    ----------
+    params : ARDrone2Params
+        Mass, inertia, ``g``, ``k`` (and ``arm`` unless given).
+    c, d : array_like (4,), optional
+        Thrust and torque coefficients of motors 1-4 (default the means; see
+        :func:`motor_coefficients`).
+    arm : float, optional
+        Arm distance of eq. (2.12), m (:func:`visloc.control.resolve_arm`).
+    motor_lag : float
+        Time constant of the first-order motor lag of eq. (2.13), s; 0 (the report's model)
+        applies commands at once.
+    gyroscopic : bool
+        Include the gyroscopic term (see :func:`visloc.model.derivatives`).
+    state : array_like (12,), optional
+        Initial state (:data:`visloc.model.STATE_NAMES`); default at rest at the origin.
+    pwm_max : float
+        Command saturation, percent.
+
+    Attributes
+    ----------
+    state : ndarray (12,)
+        Current state.
+    time : float
+        Simulated time, s.
+    pwm : ndarray (4,)
+        Last applied (saturated) commands, percent.
+    """
+
+    def __init__(self, params: ARDrone2Params = ARDRONE2, *, c: ArrayLike | None = None,
+                 d: ArrayLike | None = None, arm: float | None = None, motor_lag: float = 0.0,
+                 gyroscopic: bool = False, state: ArrayLike | None = None,
+                 pwm_max: float = 100.0) -> None:
+        p = check_params(params)
+        self.arm = resolve_arm(p, arm)
+        self.params = replace(p, arm=self.arm)
+        self.c = self.params.c_motors if c is None else as_array(c, "c", (4,))
+        self.d = self.params.d_motors if d is None else as_array(d, "d", (4,))
+        self.gamma = mixer_matrix(self.params, c=self.c, d=self.d)  # report eq. (2.12)
+        self.motor_lag = check_real(motor_lag, "motor_lag", nonneg=True)
+        if not isinstance(gyroscopic, bool):
+            raise TypeError(f"gyroscopic: expected bool, got {type(gyroscopic).__name__}")
+        self.gyroscopic = gyroscopic
+        self.pwm_max = check_real(pwm_max, "pwm_max", positive=True)
+        self.inertia = np.array([p.Ixx, p.Iyy, p.Izz])
+        self.state = np.zeros(12) if state is None else as_array(state, "state", (12,)).copy()
+        self.time = 0.0
+        self.pwm = np.zeros(4)
+        self._bar = np.zeros(4)  # lagged (pwm + k)^2 of each motor, %^2
+
+    @property
+    def inputs(self) -> FloatArray:
+        """``[T, tau_x, tau_y, tau_z]`` (4,) the motors give now, N and N m."""
+        return self.gamma @ self._bar  # report eq. (2.11)
+
+    def trim(self, pwm: ArrayLike) -> None:
+        """Set the motors to ``pwm`` at once (no lag), e.g. hover trim before the start."""
+        self.pwm = np.clip(as_array(pwm, "pwm", (4,)), 0.0, self.pwm_max)
+        self._bar = pwm_bar(self.pwm, self.params.k)
+
+    def acceleration(self, force: FloatArray | None = None) -> FloatArray:
+        """Inertial acceleration ``nu'`` (3,) now, m/s^2 (for the accelerometer)."""
+        return self._f(self.state, self.inputs, force)[3:6]
+
+    def _f(self, s: FloatArray, u: FloatArray, force: FloatArray | None) -> FloatArray:
+        out = rhs(s, u, self.params.mass, self.params.g, self.inertia, self.gyroscopic)
+        if force is not None:
+            out[3:6] += force / self.params.mass
+        return out
+
+    def step(self, pwm: ArrayLike, dt: float, force: ArrayLike | None = None) -> FloatArray:
+        """Apply ``pwm`` for ``dt`` seconds; return the new state.
+
+        Parameters
+        ----------
+        pwm : array_like (4,)
+            Motor commands, percent (clipped to ``[0, pwm_max]``).
+        dt : float
+            Step, s (> 0).
+        force : array_like (3,), optional
+            External force on the CoG in the inertial frame, N, held over the step.
+
+        Returns
+        -------
+        ndarray (12,)
+            The state after the step (also in :attr:`state`).
+
+        Raises
+        ------
+        FloatingPointError
+            If the state becomes non-finite or reaches the Z-Y-X singularity (the run has
+            diverged; the caller reports it).
+        """
+        h = check_real(dt, "dt", positive=True)
+        cmd = np.clip(as_array(pwm, "pwm", (4,)), 0.0, self.pwm_max)
+        f = None if force is None else as_array(force, "force", (3,))
+        target = pwm_bar(cmd, self.params.k)  # report eqs. (2.17)-(2.18)
+        if self.motor_lag > 0.0:  # report eq. (2.13), solved exactly over the step
+            self._bar = target + (self._bar - target) * math.exp(-h / self.motor_lag)
+        else:
+            self._bar = target
+        self.pwm = cmd
+        u = self.inputs
+        s = self.state
+        with np.errstate(over="ignore", invalid="ignore"):  # checked just below
+            k1 = self._f(s, u, f)
+            k2 = self._f(s + 0.5 * h * k1, u, f)
+            k3 = self._f(s + 0.5 * h * k2, u, f)
+            k4 = self._f(s + h * k3, u, f)
+            new = s + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        if not np.all(np.isfinite(new)) or abs(math.cos(new[7])) < 1e-6:
+            raise FloatingPointError(f"state not finite or at the pitch singularity at "
+                                     f"t = {self.time + h:.3f} s: {new!r}")
+        self.state = new
+        self.time += h
+        return new
+
+    def rotation(self) -> FloatArray:
+        """Body-to-inertial rotation ``R(lambda)`` (3, 3) of the current state (eq. 2.6)."""
+        return rotation_matrix(self.state[6:9])

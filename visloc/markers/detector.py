@@ -27,7 +27,8 @@ from numpy.typing import NDArray
 from visloc.markers.binarize import blur, default_window, threshold, to_gray
 from visloc.markers.bits import CellSample, decode, read_bits, sample_cells
 from visloc.markers.contours import CandidateFilter, filter_candidates, find_contours
-from visloc.markers.corners import _NEXT, RadialSplit, fit_quad, orient_clockwise
+from visloc.markers.corners import _NEXT, RadialSplit, orient_clockwise
+from visloc.markers.corners_batch import fit_quads
 from visloc.markers.dictionary import Dictionary, load_dictionary
 from visloc.markers.refine import refine_quads
 from visloc.types import MarkerDetection
@@ -164,7 +165,7 @@ class _Cands:
     quads: list[NDArray[np.float64]] = field(default_factory=list)
     contours: list[NDArray[np.int32]] = field(default_factory=list)
     scales: list[float] = field(default_factory=list)
-    splits: list[RadialSplit] = field(default_factory=list)
+    splits: list[RadialSplit | None] = field(default_factory=list)
 
 
 class MarkerDetector:
@@ -275,21 +276,21 @@ class MarkerDetector:
             valid, bits = read_bits(sample_cells(gray, approx[fresh], n_cells), 0.5)[:2]
             white = bits.reshape(len(bits), -1).sum(axis=1)
             looks = valid & (white >= lo_white) & (white <= hi_white)
-            for i, ok in zip(fresh, looks, strict=True):
-                contour = contours[i]
-                if not ok:
-                    _note(log, contour, float(scale[0]), None, None, None, None, None, "bits")
+            for i in fresh[~looks]:
+                _note(log, contours[i], float(scale[0]), None, None, None, None, None, "bits")
+            keep = fresh[looks]
+            hints = (approx[keep] + 0.5) / scale - 0.5
+            quads, fitted, splits = fit_quads([contours[i] for i in keep], hints, sigma=p.corner_sigma,
+                                              padding=p.corner_padding, splits=log is not None)  # 6-7
+            for j, i in enumerate(keep):
+                if not fitted[j]:
+                    _note(log, contours[i], float(scale[0]), None, None, None, None, None, "corners")
                     continue
-                hint = (approx[i] + 0.5) / scale - 0.5
-                res = fit_quad(contour, sigma=p.corner_sigma, padding=p.corner_padding, hint=hint)  # 6-7
-                if res is None:
-                    _note(log, contour, float(scale[0]), None, None, None, None, None, "corners")
-                    continue
-                cands.quads.append((res[0] + 0.5) * scale - 0.5)  # to full-resolution pixel centres
-                cands.contours.append(contour)
+                cands.quads.append((quads[j] + 0.5) * scale - 0.5)  # to full-resolution pixel centres
+                cands.contours.append(contours[i])
                 cands.scales.append(float(scale[0]))
-                cands.splits.append(res[1])
-                seen = np.concatenate([seen, approx[i : i + 1]])
+                cands.splits.append(splits[j] if splits is not None else None)
+            seen = np.concatenate([seen, approx[keep[fitted]]])
         if not cands.quads:
             return []
         quads = np.array(cands.quads)

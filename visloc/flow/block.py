@@ -70,34 +70,30 @@ def _groups(img: NDArray[np.uint8], step: int, rows: int, cols: int, sx: int = 0
     return gx.astype(np.float32), gy.T.astype(np.float32)
 
 
-@lru_cache(maxsize=32)
-def _shift_table(n: int, search: int) -> tuple[NDArray, NDArray, NDArray, NDArray]:
-    """Shifts d and the overlap [lo, hi) of ``p[k]`` and ``q[k + d]`` for profiles of length n."""
-    d = np.arange(-search, search + 1)
-    lo = np.maximum(0, -d)
-    hi = np.minimum(n, n - d)
-    return d, lo, hi, (hi - lo).astype(np.float64)
-
-
 def _global_shift(p: NDArray, q: NDArray, search: int) -> int:
-    """Integer d in [-search, search] minimising the mean squared difference of ``p[k]`` and
-    ``q[k + d]`` over their overlap."""
+    """Integer d in [-S, S] minimising the sum of squared differences of the central part
+    ``p[S : n - S]`` of ``p`` and ``q`` taken ``d`` further along (``S = min(search, n // 3)``):
+    one ``cv2.matchTemplate`` (TM_SQDIFF) over the whole range, every shift compared over the
+    same number of samples."""
     n = len(p)
-    search = min(search, n // 2)
-    d, lo, hi, count = _shift_table(n, search)
-    pq = np.correlate(q, p, mode="full")[n - 1 - search : n + search]  # sum_k p[k] q[k + d]
-    cp = np.zeros(n + 1)
-    np.cumsum(p * p, out=cp[1:])
-    cq = np.zeros(n + 1)
-    np.cumsum(q * q, out=cq[1:])
-    ssd = cp[hi] - cp[lo] + cq[hi + d] - cq[lo + d] - 2.0 * pq
-    return int(d[np.argmin(ssd / count)])
+    s = min(search, n // 3)
+    template = np.ascontiguousarray(p[s : n - s], np.float32)[None, :]
+    cost = cv2.matchTemplate(np.ascontiguousarray(q, np.float32)[None, :], template, cv2.TM_SQDIFF)
+    return int(cv2.minMaxLoc(cost)[2][0]) - s
+
+
+def _windows(a: NDArray, length: int) -> NDArray:
+    """Read-only view (rows, n - length + 1, length) of every window of each row of ``a`` (C-contiguous)."""
+    rows, n = a.shape
+    view = np.ndarray((rows, n - length + 1, length), a.dtype, a, 0, (a.strides[0], a.strides[1], a.strides[1]))
+    view.flags.writeable = False
+    return view
 
 
 def _profile(g: NDArray, k: int, gradient: bool) -> NDArray:
     """Band sums of ``k`` consecutive groups, differentiated along the profile if asked."""
     bands = g if k == 1 else (g[:-1] + g[1:] if k == 2 else sliding_window_view(g, k, axis=0).sum(axis=-1))
-    return np.diff(bands, axis=1) if gradient else bands
+    return bands[:, 1:] - bands[:, :-1] if gradient else bands
 
 
 def _best_shifts(cost: NDArray, p_seg: NDArray, q_seg: NDArray) -> tuple[NDArray, NDArray, NDArray]:
@@ -112,20 +108,19 @@ def _best_shifts(cost: NDArray, p_seg: NDArray, q_seg: NDArray) -> tuple[NDArray
     """
     s, n = cost.shape
     r = np.arange(s)
-    i = np.argmin(cost, axis=1)
-    im, ip = np.maximum(i - 1, 0), np.minimum(i + 1, n - 1)
+    i = cost.argmin(axis=1)
     c0 = cost[r, i]
-    masked = cost.copy()
-    masked[r, im] = masked[r, i] = masked[r, ip] = np.inf
-    second = masked.min(axis=1)
+    near = np.abs(np.arange(n)[None, :] - i[:, None]) < 2  # the best shift and its neighbours
+    second = np.where(near, np.inf, cost).min(axis=1)
+    im, ip = np.maximum(i - 1, 0), np.minimum(i + 1, n - 1)
     g = 0.5 * (q_seg[r, ip] - q_seg[r, im])
-    gg = np.einsum("sl,sl->s", g, g)
-    step = -np.einsum("sl,sl->s", g, q_seg[r, i] - p_seg) / np.maximum(gg, 1e-12)
+    gg = np.vecdot(g, g)
+    step = np.vecdot(g, p_seg - q_seg[r, i]) / np.maximum(gg, 1e-12)
     with np.errstate(invalid="ignore", divide="ignore"):  # rows with no valid cost
         den = cost[r, im] + cost[r, ip] - 2.0 * c0
         good = (i > 0) & (i < n - 1) & (den > 0) & np.isfinite(den)  # a proper inner minimum
-        ratio = np.where(good & np.isfinite(second) & (second > 0), c0 / second, 1.0)
-    off = np.where(good & (gg > 0), np.clip(step, -0.75, 0.75), 0.0)
+        ratio = np.where(good & (second > 0) & (second < np.inf), c0 / second, 1.0)
+    off = np.where(good & (gg > 0), np.minimum(np.maximum(step, -0.75), 0.75), 0.0)
     return i, off, ratio
 
 
@@ -216,11 +211,11 @@ def block_flow(
     # profile of a band by its length times the angle, so the band is kept short
     ny, nx = len(gxa), len(gya)
     r0, r1, c0, c1 = ny // 3, ny - ny // 3, nx // 3, nx - nx // 3
-    ga = (gxa[r0:r1].mean(axis=0), gya[c0:c1].mean(axis=0))
+    ga = (gxa[r0:r1].sum(axis=0) * (1.0 / (r1 - r0)), gya[c0:c1].sum(axis=0) * (1.0 / (c1 - c0)))
     gb = (cv2.reduce(b_img[r0 * stp : r1 * stp, :cols], 0, cv2.REDUCE_AVG, dtype=cv2.CV_32F)[0],
           cv2.reduce(b_img[:rows, c0 * stp : c1 * stp], 1, cv2.REDUCE_AVG, dtype=cv2.CV_32F)[:, 0])
     if grad:
-        ga, gb = (np.diff(ga[0]), np.diff(ga[1])), (np.diff(gb[0]), np.diff(gb[1]))
+        ga, gb = tuple(v[1:] - v[:-1] for v in ga), tuple(v[1:] - v[:-1] for v in gb)
     sx = _global_shift(ga[0], gb[0], gsrch)
     sy = _global_shift(ga[1], gb[1], gsrch)
     gxb, gyb = _groups(b_img, stp, rows, cols, sx, sy)
@@ -239,18 +234,18 @@ def block_flow(
     pos = (lay.start + shift)[:, None] + lay.d[None, :]  # where the segment may be in the second frame
     ok = (pos >= 0) & (pos <= lay.limit[:, None])
     pos = np.minimum(np.maximum(pos, 0), lay.limit[:, None])
-    p_seg = sliding_window_view(P, seg_len, axis=1)[lay.band, lay.start]  # (S, L)
-    q_seg = sliding_window_view(Q, seg_len, axis=1)[lay.band[:, None], pos]  # (S, D, L)
+    p_seg = _windows(P, seg_len)[lay.band, lay.start]  # (S, L)
+    q_seg = _windows(Q, seg_len)[lay.band[:, None], pos]  # (S, D, L)
     if not grad:
         p_seg = p_seg - p_seg.mean(axis=1, keepdims=True)
         q_seg = q_seg - q_seg.mean(axis=2, keepdims=True)
     diff = q_seg - p_seg[:, None, :]
-    cost = np.where(ok, np.einsum("sdl,sdl->sd", diff, diff), np.inf)
+    cost = np.where(ok, np.vecdot(diff, diff), np.inf)
     best, off, ratio = _best_shifts(cost, p_seg, q_seg)
     disp = (shift + lay.d[best] + off).reshape(2, -1)
-    texture = np.einsum("sl,sl->s", p_seg, p_seg).reshape(2, -1).min(axis=0)
+    texture = np.vecdot(p_seg, p_seg).reshape(2, -1).min(axis=0)
     ratio = ratio.reshape(2, -1).max(axis=0)
     half = texture.size // 2
     ref = float(np.partition(texture, half)[half]) if texture.size else 0.0  # median
-    conf = np.clip(1.0 - ratio, 0.0, 1.0) * (np.clip(texture / ref, 0.0, 1.0) if ref > 0 else 0.0)
+    conf = np.maximum(1.0 - ratio, 0.0) * (np.minimum(texture / ref, 1.0) if ref > 0 else 0.0)
     return FlowField(lay.centers, disp.T.astype(np.float64), conf.astype(np.float64), bsz, (w, h))

@@ -114,6 +114,9 @@ def test_demo_prints_a_table_and_writes_outputs(tmp_path, capsys):
     assert main(["demo", "--out", str(tmp_path / "demo"), "--frames", "2"]) == 0
     text = capsys.readouterr().out
     assert "corner RMS px" in text and "markers found" in text
+    assert "side step" in text and "Hover on visloc's vision" in text
+    rows = (tmp_path / "demo" / "sidestep.csv").read_text().splitlines()
+    assert rows[0].startswith("t,x,y,z") and len(rows) == 1202
     assert len(_lines(tmp_path / "demo" / "detections.jsonl")) == 2
     assert len(list((tmp_path / "demo" / "annotated").glob("*.png"))) == 2
 

@@ -94,7 +94,10 @@ class ControlSpecs:
     The defaults were chosen with ``bench/sim.py``'s sweep on the non-linear simulation
     (:func:`visloc.sim.simulate`): a 1 m side step settles to 5 % in about 1.5 s with about
     3 % overshoot, and all 256 vertices stay stable at 2 sigma. The position integral corner
-    sits a twentieth of the crossover down: a tenth leaves a slow tail on each step.
+    sits a twentieth of the crossover down: a tenth leaves a slow tail on each step. The
+    report's model has no motor lag; with a first-order lag (eq. 2.13) in the simulation the
+    20 rad/s attitude loops still fly the side step up to a time constant of 0.07 s and
+    crash at 0.08 s (``visloc sim sidestep --motor-lag``): slow motors need slower specs.
     """
 
     attitude: LoopSpec = field(default_factory=lambda: LoopSpec(20.0, 60.0))

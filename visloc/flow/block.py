@@ -49,9 +49,13 @@ def check_pair(prev: object, curr: object) -> tuple[NDArray[np.uint8], NDArray[n
 
 
 def default_block(shape: tuple[int, ...]) -> int:
-    """Block side for frames of ``shape`` (H, W): the report's 40 px at 320 x 240, scaling
-    with the short side, even, in [16, 64]."""
-    return min(64, max(16, round(min(shape[:2]) / 12.0) * 2))
+    """Block side for frames of ``shape`` (H, W): the report's 40 px at 320 x 240, growing
+    with the fourth root of the short side above that (48 px at 640 x 480: more, smaller blocks
+    measure large frames better, see ``bench/flow.py``), at most a sixth of the short side, even,
+    in [16, 64]."""
+    short = min(shape[:2])
+    side = min(40.0 * (short / 240.0) ** 0.25, short / 6.0)
+    return min(64, max(16, round(side / 2.0) * 2))
 
 
 def _groups(img: NDArray[np.uint8], step: int, rows: int, cols: int, sx: int = 0, sy: int = 0):

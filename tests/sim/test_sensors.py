@@ -35,3 +35,21 @@ def test_ultrasound_follows_eq_3_12():
     s[2] = -1.0
     tilted = rotation_matrix([0.3, 0.0, 0.0])  # the beam runs along body z: a longer path
     assert ultrasound_height(us.sample(s, tilted)).height == pytest.approx(1.0 / np.cos(0.3))
+
+
+def test_vision_estimator_takes_the_ultrasound_height():
+    from visloc.estimation import ultrasound_reading
+    from visloc.pose import GridMap
+    from visloc.sim import BottomCamera, VisionEstimator
+
+    camera = BottomCamera(GridMap(4, 4, 0.1, 0.05), "DICT_4X4_50")
+    s = np.zeros(12)
+    s[2] = -1.0
+    est = VisionEstimator(camera, s)
+    est.imu(0.0, np.zeros(3), np.array([0.0, 0.0, -9.81]))
+    assert est.ultrasound(0.0, ultrasound_reading(1.02))  # 2 cm higher: pulled up
+    assert -1.02 < est.state[2] < -1.0
+    z = est.state[2]
+    assert not est.ultrasound(0.0, 0.0)  # blind zone
+    assert not est.ultrasound(0.0, ultrasound_reading(2.0))  # far off the prediction: gated
+    assert est.state[2] == z

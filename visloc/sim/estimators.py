@@ -9,7 +9,7 @@
   and is pulled towards the map pose's attitude at each fix, the complementary filter of
   report eq. (3.4) with the vision angles in place of the accelerometer's (in flight the
   accelerometer of a drag-free quadrotor only sees the thrust axis). The body rates are the
-  gyro's.
+  gyro's. The ultrasound (report §3.2.1) corrects the height between camera fixes.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from visloc.control._checks import as_array, check_real
+from visloc.estimation.height import ultrasound_height
 from visloc.estimation.kalman import PositionVelocityKF
 from visloc.markers.detector import MarkerDetector
 from visloc.model.rigid_body import euler_rate_matrix, rotation_matrix
@@ -128,6 +129,35 @@ class VisionEstimator:
         fix = estimate_camera_pose(self.detector.detect(image), self.camera.marker_map,
                                    self.intrinsics)
         return None if fix is None else (fix.pose, fix.position_covariance)
+
+    def ultrasound(self, t: float, reading: float, std: float = 0.01) -> bool:
+        """Correct the height with one ultrasound reading taken at ``t`` (report §3.2.1).
+
+        The reading becomes a distance along the beam by report eq. (3.13)
+        (:func:`visloc.estimation.ultrasound_height`), a height by the estimated tilt, and an
+        update of the filter's ``z`` alone (``H`` picks it from the state). Readings in a blind
+        zone, and those more than 3 sigma from the prediction, are skipped.
+
+        Returns
+        -------
+        bool
+            Whether the reading was used.
+        """
+        est = ultrasound_height(reading)
+        if not bool(est.valid):
+            return False
+        self.kf.predict(t)
+        phi, theta = self.lam[0], self.lam[1]
+        z = -float(est.height) * math.cos(phi) * math.cos(theta)  # NED: down is +
+        H = np.zeros((1, self.kf.dim_x))
+        H[0, 2 * self.kf.order] = 1.0  # the z position (order_by_dim layout)
+        y = z - float(self.kf.x[2 * self.kf.order])
+        S = float(self.kf.P[2 * self.kf.order, 2 * self.kf.order]) + std**2
+        if y * y > 9.0 * S:
+            return False
+        self.kf.kf.update(np.array([[z]]), R=np.array([[std**2]]), H=H)
+        self.kf.kf.P = 0.5 * (self.kf.kf.P + self.kf.kf.P.T)
+        return True
 
     def image(self, t: float, image: NDArray[np.uint8], dt: float) -> bool:
         """Correct with one bottom-camera image taken at ``t``, ``dt`` after the previous one.

@@ -3,7 +3,8 @@
 :func:`simulate` integrates the non-linear model (:class:`visloc.sim.Vehicle`, RK4 at ``dt``)
 with motor commands from :class:`visloc.control.Controller` at ``control_rate``; the
 controller flies on the estimate of :mod:`visloc.sim.estimators` (the true state, or visloc's
-marker-grid vision fused with the IMU, the bottom camera ticking at ``camera_rate``). It
+marker-grid vision fused with the IMU and the ultrasound, the bottom camera ticking at
+``camera_rate``). It
 returns stacked arrays and an exit status with a readable reason (:class:`SimStatus`).
 """
 
@@ -26,7 +27,7 @@ from visloc.model.propulsion import hover_pwm
 from visloc.pose.maps import GridMap
 from visloc.sim.estimators import TruthEstimator, VisionEstimator
 from visloc.sim.scenarios import Scenario, get_scenario
-from visloc.sim.sensors import BottomCamera, Imu
+from visloc.sim.sensors import BottomCamera, Imu, Ultrasound
 from visloc.sim.vehicle import Vehicle, motor_coefficients
 from visloc.types import FloatArray
 
@@ -37,6 +38,9 @@ SIM_GRID = {"rows": 10, "cols": 10, "marker_length": 0.10, "spacing": 0.05}
 
 CRASH_TILT = math.radians(80.0)
 """Roll or pitch beyond which the drone counts as crashed (it cannot recover)."""
+
+ULTRASOUND_PERIOD = 0.04
+"""Seconds between ultrasound readings in the vision scenarios (25 Hz)."""
 
 VISION_TIMEOUT = 1.0
 """Seconds without a vision fix after which a vision run counts as diverged."""
@@ -258,6 +262,7 @@ def simulate(
             vehicle.step(cmd.pwm, h)
     initial = vehicle.state.copy()
     imu = Imu(rng=rng)
+    sonar = Ultrasound(rng=rng)
     camera = None
     if sc.estimator == "vision":
         camera = BottomCamera(GridMap(**SIM_GRID), "DICT_4X4_100", rng=rng)
@@ -274,7 +279,7 @@ def simulate(
     saturated = np.zeros(n, bool)
     gust = np.zeros(3)
     gust_a = math.exp(-2.0 * math.pi * 1.0 * ctrl_dt)  # 1 Hz low-pass turbulence
-    next_frame, frames = 0.0, 0
+    next_frame, frames, next_echo = 0.0, 0, 0.0
     status, reason = None, ""
     wall = time.perf_counter()
     k = 0
@@ -291,6 +296,9 @@ def simulate(
             if isinstance(estimator, VisionEstimator):
                 gyro, accel = imu.sample(s, R, vehicle.acceleration(force), p.g)
                 estimator.imu(t, gyro, accel)
+                if t + 1e-9 >= next_echo:  # report §3.2.1: the ultrasound at 25 Hz
+                    estimator.ultrasound(t, sonar.sample(s, R))
+                    next_echo += ULTRASOUND_PERIOD
                 if t + 1e-9 >= next_frame:
                     estimator.image(t, camera.capture(s, R), cam_dt)  # type: ignore[union-attr]
                     frames += 1

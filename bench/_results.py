@@ -13,3 +13,12 @@ def write_results(out: str | Path, name: str, result: dict, md: str, default=Non
     (out / f"{name}.json").write_text(json.dumps(result, indent=1, default=default))
     (out / f"{name}.md").write_text(md)
     print(md)
+
+
+def fmt(v, digits: int = 3, *, style: str = "f", none: str = "–") -> str:
+    """A table cell: ``none`` for None, floats with ``digits`` in ``style`` ("f" or "g"), else str."""
+    if v is None:
+        return none
+    if isinstance(v, float):
+        return f"{v:.{digits}{style}}"
+    return str(v)

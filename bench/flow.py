@@ -27,7 +27,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from _results import write_results
+from _results import fmt, write_results
 
 from visloc.flow import block_flow, global_motion, ground_velocity
 from visloc.pose import Camera
@@ -135,10 +135,6 @@ def still_frames(size):
         gv = ground_velocity(global_motion(f), cam, 1.0, 1 / 60.0, field=f)
         out[name] = float(np.linalg.norm(gv.v))
     return out
-
-
-def fmt(v, d=3):
-    return "–" if v is None else f"{v:.{d}f}"
 
 
 def markdown(result) -> str:

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from _results import write_results
+from _results import fmt, write_results
 
 from visloc.markers import FAST_PASSES, MarkerDetector
 from visloc.pose import Camera, estimate_marker_pose, rotation_angle
@@ -260,14 +260,6 @@ def run_negatives():
 def _plain(o):
     """JSON fallback for numpy scalars."""
     return o.item() if hasattr(o, "item") else str(o)
-
-
-def fmt(v, digits=3):
-    if v is None:
-        return "–"
-    if isinstance(v, float):
-        return f"{v:.{digits}f}"
-    return str(v)
 
 
 def markdown(result) -> str:

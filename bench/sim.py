@@ -27,7 +27,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from _results import write_results
+from _results import fmt, write_results
 
 from visloc.control import ControlSpecs, LoopSpec, design_gains, vertex_check
 from visloc.model import ARDRONE2
@@ -104,11 +104,7 @@ def sweep() -> list[dict]:
 
 
 def _fmt(v, digits=3):
-    if v is None:
-        return "n/a"
-    if isinstance(v, float):
-        return f"{v:.{digits}g}"
-    return str(v)
+    return fmt(v, digits, style="g", none="n/a")
 
 
 def markdown(result) -> str:

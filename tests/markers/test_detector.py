@@ -63,6 +63,27 @@ def test_small_markers_are_found(detector):
     assert n_found == n_truth
 
 
+def test_tiny_markers_in_a_large_frame_as_often_as_opencv(detector, monkeypatch):
+    # 10-23 px markers in 1280 x 720 frames: the frame is searched shrunk, and the candidate
+    # perimeter bound must not drop what OpenCV's detector finds at full size
+    import cv2
+
+    from visloc.synth import scenes
+
+    monkeypatch.setitem(scenes._SIZE, "small", (0.014, 0.03))
+    peer = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50),
+                                   cv2.aruco.DetectorParameters())
+    ours = theirs = total = 0
+    for i in range(12):
+        sc = random_scene(np.random.default_rng([7, i]), size=(1280, 720), difficulty="small")
+        truth = {m.id for m in sc.markers if m.visible}
+        total += len(truth)
+        ours += len(truth & {d.id for d in detector.detect(sc.image)})
+        ids = peer.detectMarkers(sc.image)[1]
+        theirs += len(truth & set(() if ids is None else ids.ravel().tolist()))
+    assert total >= 30 and ours >= theirs and ours >= 0.8 * total, (ours, theirs, total)
+
+
 def test_empty_textured_frames_give_no_detection(detector):
     for seed in range(300, 306):
         scene = random_scene(seed, size=(640, 480), difficulty="empty")

@@ -42,7 +42,10 @@ class CandidateFilter:
     Attributes
     ----------
     min_perimeter_rate, max_perimeter_rate : float
-        Contour length bounds as fractions of the image's larger side (OpenCV's 0.03 and 4.0).
+        Contour length bounds as fractions of the searched image's larger side (OpenCV: 0.03
+        and 4.0). The lower one is 0.02 here: a large frame is searched shrunk (``base_height``),
+        where 0.03 of its side in contour points dropped the smallest decodable markers
+        (10-14 px at 1280 x 720) that OpenCV still finds at full size.
     approx_rate : float
         Polygon approximation tolerance as a fraction of the perimeter; the contour must
         simplify to exactly four vertices (at this tolerance, or at twice it when the first
@@ -58,7 +61,7 @@ class CandidateFilter:
         may lie outside the image).
     """
 
-    min_perimeter_rate: float = 0.03
+    min_perimeter_rate: float = 0.02
     max_perimeter_rate: float = 4.0
     approx_rate: float = 0.05
     min_side: float = 6.0

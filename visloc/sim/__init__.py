@@ -10,7 +10,8 @@ with :class:`visloc.control.Controller` and returns a :class:`SimResult` with a
 """
 
 from visloc.sim.estimators import TruthEstimator, VisionEstimator
-from visloc.sim.loop import SIM_GRID, SimResult, SimStatus, linear_step_response, simulate
+from visloc.sim.loop import SIM_GRID, SimResult, SimStatus, simulate
+from visloc.sim.metrics import linear_step_response, settling_time
 from visloc.sim.scenarios import SCENARIOS, Scenario, get_scenario
 from visloc.sim.sensors import BODY_TO_CAMERA, MAP_FROM_NED, BottomCamera, Imu, Ultrasound
 from visloc.sim.vehicle import Vehicle, motor_coefficients
@@ -32,5 +33,6 @@ __all__ = [
     "get_scenario",
     "linear_step_response",
     "motor_coefficients",
+    "settling_time",
     "simulate",
 ]

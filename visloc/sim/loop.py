@@ -17,21 +17,21 @@ from dataclasses import dataclass, field, replace
 from enum import Enum
 
 import numpy as np
-from scipy.linalg import expm
 
 from visloc.control._checks import check_params, check_real, resolve_arm
 from visloc.control.controller import Controller
-from visloc.control.design import ControllerGains, ControlSpecs, augmented_model
+from visloc.control.design import ControllerGains, ControlSpecs
 from visloc.model.params import ARDRONE2, ARDrone2Params
 from visloc.model.propulsion import hover_pwm
 from visloc.pose.maps import GridMap
 from visloc.sim.estimators import TruthEstimator, VisionEstimator
+from visloc.sim.metrics import run_metrics, step_metrics_linear
 from visloc.sim.scenarios import Scenario, get_scenario
 from visloc.sim.sensors import BottomCamera, Imu, Ultrasound
 from visloc.sim.vehicle import Vehicle, motor_coefficients
 from visloc.types import FloatArray
 
-__all__ = ["SIM_GRID", "SimResult", "SimStatus", "linear_step_response", "simulate"]
+__all__ = ["SIM_GRID", "SimResult", "SimStatus", "simulate"]
 
 SIM_GRID = {"rows": 10, "cols": 10, "marker_length": 0.10, "spacing": 0.05}
 """The floor grid of the vision scenarios (DICT_4X4_100), as ``visloc render localize``'s."""
@@ -47,9 +47,6 @@ VISION_TIMEOUT = 1.0
 
 WARMUP_SECONDS = 20.0
 """Default hover before t = 0 with spread motors (``simulate(warmup=...)``), s."""
-
-LINEAR_SECONDS = 20.0
-"""Shortest time the linear counterpart of a step is run for (its integrators never stop)."""
 
 FAR = 20.0
 """Distance from the set point (m) beyond which a run counts as diverged."""
@@ -117,51 +114,6 @@ class SimResult:
         out.update(self.metrics)
         out["motors"] = self.motors
         return out
-
-
-def _settling(t: FloatArray, error: FloatArray, band: float, t0: float) -> float | None:
-    """Time after ``t0`` from which ``|error| <= band`` to the end; None if it never is."""
-    after = t >= t0
-    outside = after & (np.abs(error) > band)
-    if not np.any(after) or abs(error[-1]) > band:
-        return None
-    if not np.any(outside):
-        return 0.0
-    last = int(np.flatnonzero(outside)[-1])
-    return float(t[min(last + 1, len(t) - 1)] - t0)
-
-
-def linear_step_response(gains: ControllerGains, params: ARDrone2Params, step: FloatArray,
-                         seconds: float, dt: float = 0.005) -> tuple[FloatArray, FloatArray]:
-    """Set-point step of the *linear* closed loop ``x' = (A - B K) x`` (report eqs. 4.4-4.5).
-
-    Parameters
-    ----------
-    gains : ControllerGains
-    params : ARDrone2Params
-    step : ndarray (4,)
-        Set-point change ``[dx, dy, dz, dpsi]``: the error state starts at ``-step``.
-    seconds, dt : float
-        Duration and sample time, s.
-
-    Returns
-    -------
-    t : ndarray (N,)
-    position : ndarray (N, 3)
-        Position relative to the old set point, A frame (NED), m.
-    """
-    a, b = augmented_model(params)
-    a_cl = a - b @ gains.K(integral=True)  # report eq. (4.5): u = -K x
-    x = np.zeros(16)
-    x[0:3] = -step[:3]
-    x[8] = -step[3]
-    phi = expm(a_cl * dt)
-    n = round(seconds / dt) + 1
-    out = np.empty((n, 3))
-    for i in range(n):
-        out[i] = x[0:3] + step[:3]
-        x = phi @ x
-    return np.arange(n) * dt, out
 
 
 def _check_rate(value: float, name: str) -> float:
@@ -338,12 +290,12 @@ def simulate(
     m = k + 1
     t_out, states, estimates = t_out[:m], states[:m], estimates[:m]
     setpoints, pwms, saturated = setpoints[:m], pwms[:m], saturated[:m]
-    metrics = _metrics(sc, t_out, states, estimates, setpoints, saturated, wall)
+    metrics = run_metrics(sc, t_out, states, estimates, setpoints, saturated, wall)
     if isinstance(estimator, VisionEstimator):
         metrics.update(camera_frames=frames, vision_fixes=estimator.fixes,
                        vision_misses=estimator.misses)
     if sc.step is not None:
-        metrics.update(_linear_metrics(controller.gains, p, sc, duration))
+        metrics.update(step_metrics_linear(controller.gains, p, sc, duration))
     if status is None:
         settle = metrics["settling_time_s"]
         if settle is not None:
@@ -358,53 +310,3 @@ def simulate(
                      saturated, metrics, motors)
 
 
-def _event_time(sc: Scenario) -> float:
-    if sc.step is not None:
-        return sc.step[0]
-    if sc.push is not None:
-        return sc.push[0]
-    return 0.0
-
-
-def _metrics(sc: Scenario, t: FloatArray, states: FloatArray, estimates: FloatArray,
-             setpoints: FloatArray, saturated: np.ndarray, wall: float) -> dict:
-    err = states[:, :3] - setpoints[:, :3]
-    dist = np.linalg.norm(err, axis=1)
-    t0 = _event_time(sc)
-    after = t >= t0
-    settle = _settling(t, dist, sc.band, t0)
-    overshoot = None
-    if sc.step is not None:
-        start = sc.start_setpoint[:3]
-        delta = sc.step[1][:3] - start
-        size = float(np.linalg.norm(delta))
-        travel = (states[after, :3] - start) @ (delta / size)
-        overshoot = float(max(0.0, travel.max() - size) / size * 100.0)
-    dip = float(np.max(err[after, 2])) if np.any(after) else 0.0  # NED: + is below
-    tilt = np.degrees(np.max(np.abs(states[:, 6:8])))
-    return {
-        "settling_time_s": settle,
-        "overshoot_pct": overshoot,
-        "position_rms_m": float(np.sqrt(np.mean(dist**2))),
-        "final_error_m": float(dist[-1]),
-        "height_dip_m": max(dip, 0.0),
-        "estimate_rms_m": float(np.sqrt(np.mean(np.sum((estimates[:, :3] - states[:, :3]) ** 2, 1)))),
-        "max_tilt_deg": float(tilt),
-        "saturated_fraction": float(np.mean(saturated)),
-        "realtime_factor": float(t[-1] / wall) if wall > 0 else math.inf,
-    }
-
-
-def _linear_metrics(gains: ControllerGains, p: ARDrone2Params, sc: Scenario, seconds: float) -> dict:
-    """The same step on the linear closed loop: no height dip there (report §4.4)."""
-    assert sc.step is not None
-    delta = sc.step[1] - sc.start_setpoint
-    t, pos = linear_step_response(gains, p, delta, max(seconds - sc.step[0], LINEAR_SECONDS))
-    size = float(np.linalg.norm(delta[:3]))
-    err = np.linalg.norm(pos - delta[:3], axis=1)
-    travel = pos @ (delta[:3] / size)
-    return {
-        "linear_settling_time_s": _settling(t, err, sc.band, 0.0),
-        "linear_overshoot_pct": float(max(0.0, travel.max() - size) / size * 100.0),
-        "linear_height_dip_m": float(max(0.0, np.max(pos[:, 2] - delta[2]))),
-    }

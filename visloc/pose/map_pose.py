@@ -21,7 +21,8 @@ from numpy.typing import NDArray
 from visloc.pose.camera import Camera
 from visloc.pose.gauss_newton import refine_params, residuals_and_jacobian
 from visloc.pose.maps import MarkerMap
-from visloc.pose.marker_pose import MIN_PIXEL_SIGMA, estimate_marker_pose
+from visloc.pose.marker_pose import MIN_PIXEL_SIGMA
+from visloc.pose.planar import planar_solutions
 from visloc.pose.rotations import euler_to_matrix, matrix_to_euler
 from visloc.types import MarkerDetection, Pose
 
@@ -127,8 +128,9 @@ def estimate_camera_pose(
     max_iter : int
         Most Gauss-Newton iterations per fit.
     n_starts : int
-        How many of the largest markers' own poses (and their flipped solutions) are tried
-        as the start.
+        How many of the largest markers give starts: both closed-form planar poses of each
+        (:func:`visloc.pose.planar_solutions`, the flip included), moved into the map frame;
+        the one that reprojects all map corners best starts the joint fit.
 
     Returns
     -------
@@ -152,16 +154,16 @@ def estimate_camera_pose(
     area = [abs(_area(d.corners)) for d in known]
     starts = []
     for j in np.argsort(area)[::-1][:n_starts]:
-        i, d = ids[j], known[j]
+        i = ids[j]
         L = float(np.linalg.norm(marker_map.corners_of(i)[1] - marker_map.corners_of(i)[0]))
-        try:
-            T_cam_marker = estimate_marker_pose(d.corners, L, camera)
-        except ValueError:
+        try:  # both closed-form planar poses of the marker: the joint fit refines the start
+            Rs, ts = planar_solutions(xy[j], L)
+        except np.linalg.LinAlgError:
             continue
         T_map_marker_inv = marker_map.marker_pose(i).inverse()
-        for cand in (T_cam_marker, T_cam_marker.alternative):
-            if cand is not None:
-                T_cam_map = cand.compose(T_map_marker_inv)
+        for R, t in zip(Rs, ts, strict=True):
+            if t[2] > 0:  # in front of the camera
+                T_cam_map = Pose(R, t).compose(T_map_marker_inv)
                 starts.append(_params_of(T_cam_map.R, T_cam_map.t))
     if not starts:
         return None

@@ -366,13 +366,15 @@ def _merge_duplicates(found: list[tuple[MarkerDetection, float]]) -> list[Marker
     """Keep one detection per physical marker: of two with the same id whose centres are
     closer than half the smaller one's side, the larger (outer) one stays."""
     found = sorted(found, key=lambda fa: -fa[1])
-    kept: list[tuple[MarkerDetection, float]] = []
-    for det, area in found:
-        c = det.center
-        dup = any(
-            k.id == det.id and np.hypot(*(k.center - c)) < 0.5 * np.sqrt(min(area, a))
-            for k, a in kept
-        )
-        if not dup:
-            kept.append((det, area))
-    return sorted((d for d, _ in kept), key=lambda d: (d.id, d.corners[0, 1], d.corners[0, 0]))
+    kept: list[int] = []
+    if found:
+        ids = np.array([d.id for d, _ in found])
+        area = np.array([a for _, a in found])
+        c = np.array([d.center for d, _ in found])
+        d2 = ((c[:, None, :] - c[None, :, :]) ** 2).sum(axis=2)
+        dup = (ids[:, None] == ids[None, :]) & (d2 < 0.25 * np.minimum(area[:, None], area[None, :]))
+        for i in range(len(found)):
+            if not kept or not dup[i, kept].any():
+                kept.append(i)
+    dets = [found[i][0] for i in kept]
+    return sorted(dets, key=lambda d: (d.id, d.corners[0, 1], d.corners[0, 0]))

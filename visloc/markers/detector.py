@@ -370,7 +370,7 @@ def _merge_duplicates(found: list[tuple[MarkerDetection, float]]) -> list[Marker
     if found:
         ids = np.array([d.id for d, _ in found])
         area = np.array([a for _, a in found])
-        c = np.array([d.center for d, _ in found])
+        c = np.array([d.corners for d, _ in found]).mean(axis=1)
         d2 = ((c[:, None, :] - c[None, :, :]) ** 2).sum(axis=2)
         dup = (ids[:, None] == ids[None, :]) & (d2 < 0.25 * np.minimum(area[:, None], area[None, :]))
         for i in range(len(found)):

@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from visloc.control._checks import as_array, check_real
+from visloc.control.controller import wrap_angle
 from visloc.estimation.height import ultrasound_height
 from visloc.estimation.kalman import PositionVelocityKF
 from visloc.markers.detector import MarkerDetector
@@ -173,8 +174,7 @@ class VisionEstimator:
             return False
         T_cam_map, cov = fix
         position, R = self.camera.body_from_map(T_cam_map)
-        error = matrix_to_euler(R) - self.lam
-        error = (error + math.pi) % (2.0 * math.pi) - math.pi
+        error = wrap_angle(matrix_to_euler(R) - self.lam)  # elementwise on the three angles
         self.lam = self.lam + (1.0 - math.exp(-self.attitude_gain * dt)) * error  # report eq. (3.4)
         floor = self.min_fix_std**2 * np.eye(3)
         if cov is None:

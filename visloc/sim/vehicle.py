@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from visloc.control._checks import as_array, check_params, check_real, resolve_arm
+from visloc.control.robustness import max_sigma
 from visloc.model.params import ARDRONE2, ARDrone2Params
 from visloc.model.propulsion import mixer_matrix, pwm_bar
 from visloc.model.rigid_body import rhs, rotation_matrix
@@ -55,10 +56,11 @@ def motor_coefficients(params: ARDrone2Params, n_sigma: float = 0.0, *,
     else:
         signs = np.random.default_rng(seed).choice([-1.0, 1.0], size=8)
         sc, sd = signs[:4], signs[4:]
-    c = p.c_mean + n * p.c_std * sc  # report eq. (4.16): c_i = c_mean +- n sigma_c
-    d = p.d_mean + n * p.d_std * sd
+    c = p.c_mean + n * p.c_std * sc  # report eq. (4.12): c_i = c_mean + r_i sigma_c
+    d = p.d_mean + n * p.d_std * sd  # report eq. (4.13): d_i = d_mean + s_i sigma_d
     if np.any(c <= 0) or np.any(d <= 0):
-        raise ValueError(f"n_sigma: {n} standard deviations give a non-positive coefficient")
+        raise ValueError(f"n_sigma: {n} standard deviations give a non-positive coefficient "
+                         f"(at most {max_sigma(p):.3g} for these parameters)")
     return c, d
 
 

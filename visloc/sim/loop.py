@@ -244,27 +244,30 @@ def simulate(
             gust[2] = 0.0
             force = gust if force is None else force + gust
         R = vehicle.rotation()
-        try:
-            if isinstance(estimator, VisionEstimator):
-                gyro, accel = imu.sample(s, R, vehicle.acceleration(force), p.g)
-                estimator.imu(t, gyro, accel)
-                if t + 1e-9 >= next_echo:  # report §3.2.1: the ultrasound at 25 Hz
-                    estimator.ultrasound(t, sonar.sample(s, R))
-                    next_echo += ULTRASOUND_PERIOD
-                if t + 1e-9 >= next_frame:
-                    estimator.image(t, camera.capture(s, R), cam_dt)  # type: ignore[union-attr]
+        if isinstance(estimator, VisionEstimator):
+            gyro, accel = imu.sample(s, R, vehicle.acceleration(force), p.g)
+            estimator.imu(t, gyro, accel)
+            if t + 1e-9 >= next_echo:  # report §3.2.1: the ultrasound at 25 Hz
+                estimator.ultrasound(t, sonar.sample(s, R))
+                next_echo += ULTRASOUND_PERIOD
+            if t + 1e-9 >= next_frame:
+                try:
+                    image = camera.capture(s, R)  # type: ignore[union-attr]
+                except ValueError as exc:  # the view left the printed floor
+                    status, reason = SimStatus.DIVERGED, f"vision lost at t = {t:.2f} s: {exc}"
+                else:
+                    estimator.image(t, image, cam_dt)
                     frames += 1
-                    next_frame += cam_dt
-                if t - estimator.last_fix_time > VISION_TIMEOUT:
-                    status, reason = SimStatus.DIVERGED, (
-                        f"vision lost: no marker-map fix for {VISION_TIMEOUT:g} s at t = {t:.2f} s")
-            else:
-                estimator.observe(s)
-        except ValueError as exc:  # the camera's view left the printed floor
-            status, reason = SimStatus.DIVERGED, f"vision lost at t = {t:.2f} s: {exc}"
+                next_frame += cam_dt
+            if status is None and t - estimator.last_fix_time > VISION_TIMEOUT:
+                status, reason = SimStatus.DIVERGED, (
+                    f"vision lost: no marker-map fix for {VISION_TIMEOUT:g} s at t = {t:.2f} s")
+        else:
+            estimator.observe(s)
         sp = sc.setpoint(t)
-        cmd = controller.pwm(estimator.state, sp, ctrl_dt)  # report eqs. (4.5)-(4.6)
-        states[k], estimates[k], setpoints[k], pwms[k] = s, estimator.state, sp, cmd.pwm
+        x_hat = estimator.state
+        cmd = controller.pwm(x_hat, sp, ctrl_dt)  # report eqs. (4.5)-(4.6)
+        states[k], estimates[k], setpoints[k], pwms[k] = s, x_hat, sp, cmd.pwm
         saturated[k] = cmd.saturated
         if status is not None:
             break

@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 from visloc.markers.binarize import blur, default_window, threshold, to_gray
 from visloc.markers.bits import CellSample, decode, read_bits, sample_cells
 from visloc.markers.contours import CandidateFilter, filter_candidates, find_contours
-from visloc.markers.corners import _NEXT, RadialSplit, orient_clockwise
+from visloc.markers.corners import _NEXT, RadialSplit
 from visloc.markers.corners_batch import fit_quads
 from visloc.markers.dictionary import Dictionary, load_dictionary
 from visloc.markers.refine import refine_quads
@@ -245,7 +245,7 @@ class MarkerDetector:
             # a marker needs at least about 1 px per cell to be decoded: smaller ones are not looked at
             min_side = max(p.candidates.min_side, n_cells / scale.max())
             found = self._stages_2_to_5(work, window, min_side, log, scale)
-            approx = np.array([orient_clockwise(q.astype(np.float64)) for _, q in found]).reshape(-1, 4, 2)
+            approx = _clockwise(np.array([q for _, q in found], np.float64).reshape(-1, 4, 2))
             out.append(([c for c, _ in found], scale, (approx + 0.5) * scale - 0.5))
         return out
 
@@ -339,6 +339,14 @@ def _as_pass(p: object) -> SearchPass:
 def _note(log: dict | None, contour, scale, split, quad, cells, bits, det, stage: str) -> None:
     if log is not None:
         log["candidates"].append(CandidateTrace(contour, scale, split, quad, cells, bits, det, stage))
+
+
+def _clockwise(quads: NDArray) -> NDArray:
+    """Quads (K, 4, 2) ordered clockwise in the image, each from its first corner
+    (:func:`visloc.markers.corners.orient_clockwise` for all at once)."""
+    ccw = _areas(quads) <= 0
+    quads[ccw] = quads[ccw][:, [0, 3, 2, 1]]
+    return quads
 
 
 def _areas(q: NDArray) -> NDArray:

@@ -31,8 +31,6 @@ STATE_NAMES: tuple[str, ...] = (
 )
 """Names of the 12 state entries, in order (see the module docstring for frames and units)."""
 
-E3: FloatArray = np.array([0.0, 0.0, 1.0])
-
 
 def _vector(value: ArrayLike, name: str, size: int) -> FloatArray:
     try:

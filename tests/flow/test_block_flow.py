@@ -67,3 +67,25 @@ def test_bad_options():
         block_flow(a, b, block=40, step=30)
     with pytest.raises(ValueError, match="block"):
         block_flow(a, b, block=500)
+
+
+def test_band_means_match_a_replicate_padded_reference():
+    # the band means come from a summed-area table; bands shifted past the frame repeat its
+    # edge rows and columns, as cv2.BORDER_REPLICATE padding would
+    import cv2
+
+    from visloc.flow.block import _groups, _integral
+
+    rng = np.random.default_rng(0)
+    for _ in range(100):
+        h, w = (int(v) for v in rng.integers(30, 200, 2))
+        step = int(rng.integers(4, 20))
+        rows, cols = (h // step) * step, (w // step) * step
+        img = rng.integers(0, 256, (h, w), dtype=np.uint8)
+        sx, sy = (int(v) for v in rng.integers(-2 * step, 2 * step, 2))
+        m = max(abs(sx), abs(sy)) + 1
+        pad = cv2.copyMakeBorder(img, m, m, m, m, cv2.BORDER_REPLICATE).astype(np.float64)
+        gx = pad[m + sy : m + sy + rows, m : m + cols].reshape(rows // step, step, cols).mean(axis=1)
+        gy = pad[m : m + rows, m + sx : m + sx + cols].reshape(rows, cols // step, step).mean(axis=2).T
+        ax, ay = (v / step for v in _groups(_integral(img), img, step, rows, cols, sx, sy))
+        assert np.abs(ax - gx).max() < 1e-3 and np.abs(ay - gy).max() < 1e-3

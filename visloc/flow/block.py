@@ -53,25 +53,52 @@ def default_block(shape: tuple[int, ...]) -> int:
     with the fourth root of the short side above that (48 px at 640 x 480: more, smaller blocks
     measure large frames better, see ``bench/flow.py``), at most a sixth of the short side, even,
     in [16, 64]."""
-    short = min(shape[:2])
+    return _block_for(int(min(shape[:2])))
+
+
+@lru_cache(maxsize=64)
+def _block_for(short: int) -> int:
     side = min(40.0 * (short / 240.0) ** 0.25, short / 6.0)
     return min(64, max(16, round(side / 2.0) * 2))
 
 
-def _groups(img: NDArray[np.uint8], step: int, rows: int, cols: int, sx: int = 0, sy: int = 0):
-    """Mean of every ``step`` rows (``gx``: (rows/step, cols)) and every ``step`` columns
-    (``gy``: (cols/step, rows), transposed), the rows taken ``sy`` lower and the columns ``sx``
-    further right (edge pixels repeated)."""
-    if sx or sy:
-        m = max(abs(sx), abs(sy))
-        pad = cv2.copyMakeBorder(img, m, m, m, m, cv2.BORDER_REPLICATE)
-        rx = pad[m + sy : m + sy + rows, m : m + cols]  # views: no copy
-        cy = pad[m : m + rows, m + sx : m + sx + cols]
+def _integral(img: NDArray[np.uint8]) -> NDArray:
+    """Summed-area table (H + 1, W + 1) of a grey image (int32 while no sum can overflow)."""
+    return cv2.integral(img, sdepth=cv2.CV_32S if img.size * 255 < 2**31 else cv2.CV_64F)
+
+
+def _band_sums(ii: NDArray, img: NDArray[np.uint8], start: int, step: int, count: int, cols: int) -> NDArray:
+    """Sums (count, cols) over the bands of rows ``[start + j step, start + (j + 1) step)`` of
+    ``img`` (H, W), column by column for its first ``cols`` columns, from its summed-area
+    table ``ii`` (H + 1, W + 1); rows outside the image repeat its edge rows."""
+    n = img.shape[0]
+    stop = start + count * step
+    if start >= 0 and stop <= n:
+        cum = ii[start : stop + 1 : step, : cols + 1]
     else:
-        rx = cy = img[:rows, :cols]
-    gx = cv2.resize(rx, (cols, rows // step), interpolation=cv2.INTER_AREA)
-    gy = cv2.resize(cy, (cols // step, rows), interpolation=cv2.INTER_AREA)
-    return gx.astype(np.float32), gy.T.astype(np.float32)
+        cum = ii[[min(max(e, 0), n) for e in range(start, stop + 1, step)], : cols + 1]
+    d = cum[1:] - cum[:-1]
+    sums = d[:, 1:] - d[:, :-1]
+    j = 0
+    while start + j * step < 0 and j < count:  # rows above the image: its first row repeated
+        sums[j] += min(-(start + j * step), step) * img[0, :cols].astype(sums.dtype)
+        j += 1
+    j = count - 1
+    while start + (j + 1) * step > n and j >= 0:  # rows below it: its last row repeated
+        sums[j] += min(start + (j + 1) * step - n, step) * img[n - 1, :cols].astype(sums.dtype)
+        j -= 1
+    return sums
+
+
+def _groups(ii: NDArray, img: NDArray[np.uint8], step: int, rows: int, cols: int, sx: int = 0,
+            sy: int = 0) -> tuple[NDArray, NDArray]:
+    """Sums of every ``step`` rows (``gx``: (rows/step, cols)) and of every ``step`` columns
+    (``gy``: (cols/step, rows)) of ``img`` with summed-area table ``ii``, the rows taken ``sy``
+    lower and the columns ``sx`` further right (edge pixels repeated). (Sums, not means: every
+    use of them, the matching costs, their ratios and the texture relative to its median, is
+    free of scale.)"""
+    return (_band_sums(ii, img, sy, step, rows // step, cols),
+            _band_sums(ii.T, img.T, sx, step, cols // step, rows))
 
 
 def _global_shift(p: NDArray, q: NDArray, search: int) -> int:
@@ -94,37 +121,42 @@ def _windows(a: NDArray, length: int) -> NDArray:
     return view
 
 
-def _profile(g: NDArray, k: int, gradient: bool) -> NDArray:
-    """Band sums of ``k`` consecutive groups, differentiated along the profile if asked."""
+def _profile(g: NDArray, k: int, gradient: bool, out: NDArray) -> None:
+    """Band sums of ``k`` consecutive groups into ``out``, differentiated along the profile if asked."""
     bands = g if k == 1 else (g[:-1] + g[1:] if k == 2 else sliding_window_view(g, k, axis=0).sum(axis=-1))
-    return bands[:, 1:] - bands[:, :-1] if gradient else bands
+    if gradient:
+        np.subtract(bands[:, 1:], bands[:, :-1], out=out)
+    else:
+        out[...] = bands
 
 
-def _best_shifts(cost: NDArray, p_seg: NDArray, q_seg: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+_BIG = np.float32(1e30)  # the cost of a shift outside the frame (finite: no NaN from inf - inf)
+
+
+def _best_shifts(cost: NDArray, p_seg: NDArray, q_seg: NDArray, r: NDArray) -> tuple[NDArray, NDArray, NDArray]:
     """Per segment: the best integer shift index, its sub-pixel offset, and an ambiguity ratio.
 
-    The offset is one Gauss-Newton step on the squared difference around the best shift,
-    ``s = -sum(g r) / sum(g^2)`` with ``r = q - p`` there and ``g`` the profile's derivative
-    (exact for a pure shift of a linear profile, and exactly 0 for identical frames, where a
-    parabola through the costs is biased). The ratio is the best cost over the best one at
-    least two steps away: 0 for an unambiguous minimum, 1 for none (or one at the end of the
-    search range, or without curvature).
+    ``cost`` (S, D) holds ``_BIG`` where a shift leaves the frame, and in its first and last
+    column (the shifts just beyond the search range, so that the best one always has two
+    neighbours); ``r`` is ``arange(S)``. The offset is one Gauss-Newton step on the squared
+    difference around the best shift, ``s = -sum(g r) / sum(g^2)`` with ``r = q - p`` there
+    and ``g`` the profile's derivative (exact for a pure shift of a linear profile, and
+    exactly 0 for identical frames, where a parabola through the costs is biased). The ratio
+    is the best cost over the best one at least two steps away: 0 for an unambiguous
+    minimum, 1 for none (or one at the end of the search range, or without curvature).
     """
-    s, n = cost.shape
-    r = np.arange(s)
     i = cost.argmin(axis=1)
-    c0 = cost[r, i]
-    near = np.abs(np.arange(n)[None, :] - i[:, None]) < 2  # the best shift and its neighbours
-    second = np.where(near, np.inf, cost).min(axis=1)
-    im, ip = np.maximum(i - 1, 0), np.minimum(i + 1, n - 1)
-    g = 0.5 * (q_seg[r, ip] - q_seg[r, im])
-    gg = np.vecdot(g, g)
-    step = np.vecdot(g, p_seg - q_seg[r, i]) / np.maximum(gg, 1e-12)
-    with np.errstate(invalid="ignore", divide="ignore"):  # rows with no valid cost
-        den = cost[r, im] + cost[r, ip] - 2.0 * c0
-        good = (i > 0) & (i < n - 1) & (den > 0) & np.isfinite(den)  # a proper inner minimum
-        ratio = np.where(good & (second > 0) & (second < np.inf), c0 / second, 1.0)
-    off = np.where(good & (gg > 0), np.minimum(np.maximum(step, -0.75), 0.75), 0.0)
+    im, ip = i - 1, i + 1  # inside the array unless every cost is _BIG (then im = -1: no harm)
+    c0, cm, cp = cost[r, i], cost[r, im], cost[r, ip]
+    rest = cost.copy()  # the best cost at least two steps away
+    rest[r, i] = rest[r, im] = rest[r, ip] = _BIG
+    second = rest.min(axis=1)
+    g = q_seg[r, ip] - q_seg[r, im]  # twice the derivative
+    step = 2.0 * np.vecdot(g, p_seg - q_seg[r, i]) / np.maximum(np.vecdot(g, g), 1e-12)  # 0 where g = 0
+    # a proper inner minimum: neighbours inside the frame and the search range, curved
+    good = (np.maximum(cm, cp) < _BIG) & (cm + cp > 2.0 * c0)
+    ratio = np.where(good & (second > 0) & (second < _BIG), c0 / np.maximum(second, 1e-30), 1.0)
+    off = np.where(good, np.minimum(np.maximum(step, -0.75), 0.75), 0.0)
     return i, off, ratio
 
 
@@ -136,8 +168,9 @@ class _Layout(NamedTuple):
     start: NDArray  # (S,) first profile sample of each segment
     limit: NDArray  # (S,) last valid start in the second frame
     is_x: NDArray  # (S,) x segments first, then y segments
-    d: NDArray  # (D,) search offsets
+    d: NDArray  # (D,) search offsets, one beyond the range at each end
     centers: NDArray  # (N, 2) block centres
+    rows: NDArray  # (S,) 0 .. S - 1
 
 
 @lru_cache(maxsize=16)
@@ -153,9 +186,31 @@ def _layout(rows: int, cols: int, bsz: int, stp: int, srch: int, lx: int, ly: in
     limit = np.concatenate([np.full(n, lx - seg_len), np.full(n, ly - seg_len)])
     is_x = np.arange(2 * n) < n
     centers = (np.stack([xs[cc.ravel()], ys[rr.ravel()]], axis=1) + (bsz - 1) / 2.0).astype(np.float64)
-    for arr in (band, start, limit, is_x, centers):
+    rows_ = np.arange(2 * n)
+    for arr in (band, start, limit, is_x, centers, rows_):
         arr.setflags(write=False)
-    return _Layout(nby, nbx, max(lx, ly), band, start, limit, is_x, np.arange(-srch, srch + 1), centers)
+    return _Layout(nby, nbx, max(lx, ly), band, start, limit, is_x, np.arange(-srch - 1, srch + 2), centers, rows_)
+
+
+class _Search(NamedTuple):
+    shift: NDArray  # (S,) the global shift of each segment's direction
+    pos: NDArray  # (S, D) where each segment is compared in the second frame (clamped)
+    ok: NDArray  # (S, D) False where that position leaves the profile
+
+
+@lru_cache(maxsize=512)
+def _search(key: tuple[int, ...], sx: int, sy: int) -> _Search:
+    """Second-frame positions of every segment of the layout ``_layout(*key)`` for the global
+    shift (sx, sy) (cached: shifts repeat from frame to frame)."""
+    lay = _layout(*key)
+    shift = np.where(lay.is_x, sx, sy)
+    pos = (lay.start + shift)[:, None] + lay.d[None, :]
+    ok = (pos >= 0) & (pos <= lay.limit[:, None])
+    ok[:, [0, -1]] = False  # the shifts just beyond the search range: see _best_shifts
+    pos = np.minimum(np.maximum(pos, 0), lay.limit[:, None])
+    for arr in (shift, pos, ok):
+        arr.setflags(write=False)
+    return _Search(shift, pos, ok)
 
 
 def block_flow(
@@ -210,42 +265,41 @@ def block_flow(
     rows, cols = (h // stp) * stp, (w // stp) * stp
     k = bsz // stp
     grad = mode == "gradient"
-    gxa, gya = _groups(a, stp, rows, cols)
+    ia, ib = _integral(a), _integral(b_img)
+    gxa, gya = _groups(ia, a, stp, rows, cols)
     # global shift from the central third of the rows (columns): a yaw rotation smears the
     # profile of a band by its length times the angle, so the band is kept short
     ny, nx = len(gxa), len(gya)
     r0, r1, c0, c1 = ny // 3, ny - ny // 3, nx // 3, nx - nx // 3
-    ga = (gxa[r0:r1].sum(axis=0) * (1.0 / (r1 - r0)), gya[c0:c1].sum(axis=0) * (1.0 / (c1 - c0)))
-    gb = (cv2.reduce(b_img[r0 * stp : r1 * stp, :cols], 0, cv2.REDUCE_AVG, dtype=cv2.CV_32F)[0],
-          cv2.reduce(b_img[:rows, c0 * stp : c1 * stp], 1, cv2.REDUCE_AVG, dtype=cv2.CV_32F)[:, 0])
+    ga = (gxa[r0:r1].sum(axis=0), gya[c0:c1].sum(axis=0))  # sums over the same rows (columns) as gb
+    gb = (_band_sums(ib, b_img, r0 * stp, (r1 - r0) * stp, 1, cols)[0],
+          _band_sums(ib.T, b_img.T, c0 * stp, (c1 - c0) * stp, 1, rows)[0])
     if grad:
         ga, gb = tuple(v[1:] - v[:-1] for v in ga), tuple(v[1:] - v[:-1] for v in gb)
     sx = _global_shift(ga[0], gb[0], gsrch)
     sy = _global_shift(ga[1], gb[1], gsrch)
-    gxb, gyb = _groups(b_img, stp, rows, cols, sx, sy)
+    gxb, gyb = _groups(ib, b_img, stp, rows, cols, sx, sy)
     # every block's x profile (from its rows' band) and y profile (from its columns' band),
     # as one list of segments: band row, start, and the second frame's offset for each
-    px, qx = _profile(gxa, k, grad), _profile(gxb, k, grad)  # (nby, Lx)
-    py, qy = _profile(gya, k, grad), _profile(gyb, k, grad)  # (nbx, Ly)
     seg_len = bsz - 1 if grad else bsz
-    lay = _layout(rows, cols, bsz, stp, srch, px.shape[1], py.shape[1], seg_len)
+    lx, ly = cols - grad, rows - grad  # profile lengths
+    key = (rows, cols, bsz, stp, srch, lx, ly, seg_len)
+    lay = _layout(*key)
     nby, nbx = lay.nby, lay.nbx
-    P = np.zeros((nby + nbx, lay.length), np.float32)
-    Q = np.zeros_like(P)
-    P[:nby, : px.shape[1]], Q[:nby, : qx.shape[1]] = px, qx
-    P[nby:, : py.shape[1]], Q[nby:, : qy.shape[1]] = py, qy
-    shift = np.where(lay.is_x, sx, sy)
-    pos = (lay.start + shift)[:, None] + lay.d[None, :]  # where the segment may be in the second frame
-    ok = (pos >= 0) & (pos <= lay.limit[:, None])
-    pos = np.minimum(np.maximum(pos, 0), lay.limit[:, None])
+    P = np.zeros((2, nby + nbx, lay.length), np.float32)  # first frame, second frame
+    for i, (gx, gy) in enumerate(((gxa, gya), (gxb, gyb))):
+        _profile(gx, k, grad, P[i, :nby, :lx])  # (nby, Lx)
+        _profile(gy, k, grad, P[i, nby:, :ly])  # (nbx, Ly)
+    P, Q = P
+    shift, pos, ok = _search(key, sx, sy)  # where each segment may be in the second frame
     p_seg = _windows(P, seg_len)[lay.band, lay.start]  # (S, L)
     q_seg = _windows(Q, seg_len)[lay.band[:, None], pos]  # (S, D, L)
     if not grad:
         p_seg = p_seg - p_seg.mean(axis=1, keepdims=True)
         q_seg = q_seg - q_seg.mean(axis=2, keepdims=True)
     diff = q_seg - p_seg[:, None, :]
-    cost = np.where(ok, np.vecdot(diff, diff), np.inf)
-    best, off, ratio = _best_shifts(cost, p_seg, q_seg)
+    cost = np.where(ok, np.vecdot(diff, diff), _BIG)
+    best, off, ratio = _best_shifts(cost, p_seg, q_seg, lay.rows)
     disp = (shift + lay.d[best] + off).reshape(2, -1)
     texture = np.vecdot(p_seg, p_seg).reshape(2, -1).min(axis=0)
     ratio = ratio.reshape(2, -1).max(axis=0)

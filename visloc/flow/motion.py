@@ -29,18 +29,30 @@ def _image_center(field: FlowField) -> NDArray[np.float64]:
     return np.array([(w - 1) / 2.0, (h - 1) / 2.0])
 
 
-def _weighted_similarity(p: NDArray, q: NDArray, wt: NDArray) -> tuple[float, float, float, float]:
-    """Weighted least squares of ``q = [[a, -b], [b, a]] p + t``; returns (a, b, tx, ty)."""
-    sw = wt.sum()
-    mp = wt @ p / sw
-    mq = wt @ q / sw
-    pc, qc = p - mp, q - mq
-    den = float(wt @ (pc * pc).sum(axis=1))
+def _moments(p: NDArray, q: NDArray) -> NDArray:
+    """Per point (N, 8): 1, p, q, |p|^2, p.q, p x q: the sums :func:`_similarity_from_sums` needs."""
+    m = np.empty((len(p), 8))
+    m[:, 0] = 1.0
+    m[:, 1:3] = p
+    m[:, 3:5] = q
+    pq = p[:, :, None] * q[:, None, :]  # (N, 2, 2): px qx, px qy, py qx, py qy
+    np.vecdot(p, p, out=m[:, 5])
+    np.add(pq[:, 0, 0], pq[:, 1, 1], out=m[:, 6])
+    np.subtract(pq[:, 0, 1], pq[:, 1, 0], out=m[:, 7])
+    return m
+
+
+def _similarity_from_sums(m: NDArray) -> tuple[float, float, float, float]:
+    """(a, b, tx, ty) of the weighted similarity from the weighted sums of :func:`_moments`
+    (centred by subtracting the weighted means)."""
+    sw, spx, spy, sqx, sqy, spp, spq, sxq = m.tolist()
+    mpx, mpy, mqx, mqy = spx / sw, spy / sw, sqx / sw, sqy / sw
+    den = spp - sw * (mpx * mpx + mpy * mpy)
     if den <= 1e-12:  # all points at one place: translation only
-        return 1.0, 0.0, float(mq[0] - mp[0]), float(mq[1] - mp[1])
-    a = float(wt @ (pc * qc).sum(axis=1)) / den
-    b = float(wt @ (pc[:, 0] * qc[:, 1] - pc[:, 1] * qc[:, 0])) / den
-    return a, b, float(mq[0] - (a * mp[0] - b * mp[1])), float(mq[1] - (b * mp[0] + a * mp[1]))
+        return 1.0, 0.0, mqx - mpx, mqy - mpy
+    a = (spq - sw * (mpx * mqx + mpy * mqy)) / den
+    b = (sxq - sw * (mpx * mqy - mpy * mqx)) / den
+    return a, b, mqx - (a * mpx - b * mpy), mqy - (b * mpx + a * mpy)
 
 
 def similarity_fit(field: FlowField, *, min_confidence: float = 0.2, iterations: int = 3) -> GlobalMotion:
@@ -52,27 +64,30 @@ def similarity_fit(field: FlowField, *, min_confidence: float = 0.2, iterations:
     """
     c0 = _image_center(field)
     use = field.confidence >= min_confidence
-    if int(use.sum()) < 3:
+    n_use = int(np.count_nonzero(use))
+    if n_use < 3:
         return _no_motion(field, "similarity")
     p = field.centers - c0
     q = p + field.vectors
+    moments = _moments(p, q)
     wt = field.confidence
-    keep = use
+    keep, n_keep = use, n_use
     for _ in range(iterations):
-        a, b, tx, ty = _weighted_similarity(p[keep], q[keep], wt[keep])
-        dx = a * p[:, 0] - b * p[:, 1] + tx - q[:, 0]
-        dy = b * p[:, 0] + a * p[:, 1] + ty - q[:, 1]
-        r2 = dx * dx + dy * dy
+        a, b, tx, ty = _similarity_from_sums((wt * keep) @ moments)
+        res = p @ np.array([[a, b], [-b, a]]) - q
+        res += (tx, ty)
+        r2 = np.vecdot(res, res)
         kept = r2[keep]
-        med2 = float(np.partition(kept, len(kept) // 2)[len(kept) // 2])  # median of squares
+        med2 = float(np.partition(kept, n_keep // 2)[n_keep // 2])  # median of squares
         limit = 9.0 * max(1.4826**2 * med2, 0.01)  # (3 x spread)^2
         new = use & (r2 <= limit)
-        if new.sum() < 3 or (new == keep).all():
+        n_new = int(np.count_nonzero(new))
+        if n_new < 3 or n_new == n_keep and np.array_equal(new, keep):
             break
-        keep = new
-    rms = float(np.sqrt(r2[keep].mean()))
+        keep, n_keep = new, n_new
+    rms = math.sqrt(float(r2 @ keep) / n_keep)
     return GlobalMotion(np.array([tx, ty]), math.atan2(b, a), math.hypot(a, b), _rotation_centre(a, b, tx, ty, c0),
-                        rms, int(keep.sum()), "similarity")
+                        rms, n_keep, "similarity")
 
 
 def _rotation_centre(a: float, b: float, tx: float, ty: float, c0: NDArray) -> NDArray | None:

@@ -17,6 +17,7 @@ from flow rates.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -78,41 +79,45 @@ def ground_velocity(
         raise TypeError(f"camera must be a Camera, got {type(camera).__name__}")
     h = _positive(height, "height")
     dt = _positive(dt, "dt")
-    if motion.inliers < 3 or not np.isfinite(motion.translation).all():
+    tx, ty = (float(v) for v in motion.translation)
+    if motion.inliers < 3 or not (math.isfinite(tx) and math.isfinite(ty)):
         return GroundVelocity(np.zeros(2), 0.0, 0.0, "too few textured blocks to measure motion", motion)
     w, hgt = camera.size if camera.size is not None else (None, None)
     if field is not None:
         w, hgt = field.image_size
     if w is None:
         raise ValueError("camera.size is unknown: pass the FlowField (field=...) or a camera with a size")
-    center = np.array([(w - 1) / 2.0, (hgt - 1) / 2.0])
-    pp = np.array([camera.cx, camera.cy])
-    d = motion.displacement_at(pp, center)  # content displacement at the principal point, px
+    # content displacement at the principal point, px (GlobalMotion.displacement_at, in scalars)
+    rx, ry = camera.cx - (w - 1) / 2.0, camera.cy - (hgt - 1) / 2.0
+    c, s = math.cos(motion.rotation) * motion.scale, math.sin(motion.rotation) * motion.scale
+    dx, dy = c * rx - s * ry - rx + tx, s * rx + c * ry - ry + ty
     if gyro is not None:
         g = np.asarray(gyro, np.float64).reshape(-1)
         if g.shape != (3,) or not np.isfinite(g).all():
             raise ValueError(f"gyro must be three finite rates (wx, wy, wz) in rad/s, got {gyro!r}")
         # a rotation by (ax, ay) about camera x, y moves the content at the principal point by
         # (-f ay, +f ax); remove it (PX4: compensated flow = flow rate - body rate)
-        d = d - np.array([-camera.fx * g[1] * dt, camera.fy * g[0] * dt])
+        dx += camera.fx * float(g[1]) * dt
+        dy -= camera.fy * float(g[0]) * dt
     yaw = -motion.rotation  # the camera turns opposite to its image content
     # ground displacement in the second frame's axes, then turned back into the first frame's
-    D2 = -np.array([d[0] / camera.fx, d[1] / camera.fy]) * h  # report eq. (H.7)
-    c, s = np.cos(yaw), np.sin(yaw)
-    D1 = np.array([c * D2[0] - s * D2[1], s * D2[0] + c * D2[1]])
+    X2, Y2 = -dx / camera.fx * h, -dy / camera.fy * h  # report eq. (H.7)
+    c, s = math.cos(yaw), math.sin(yaw)
     quality, reason = _quality(motion, field)
-    return GroundVelocity(D1 / dt, yaw / dt, quality, reason, motion)
+    return GroundVelocity(np.array([(c * X2 - s * Y2) / dt, (s * X2 + c * Y2) / dt]), yaw / dt, quality, reason, motion)
 
 
 def _quality(motion: GlobalMotion, field: FlowField | None) -> tuple[float, str]:
     """In [0, 1]: the share of confident blocks used, reduced by a large fit residual."""
-    if field is None or len(field.confidence) == 0:
+    n = 0 if field is None else len(field.confidence)
+    if n == 0:
         support = 1.0
     else:
-        support = min(1.0, motion.inliers / max(0.5 * len(field.confidence), 1.0))
-        support *= float(np.clip(np.mean(field.confidence) / 0.5, 0.0, 1.0))
-    fit = 1.0 / (1.0 + (motion.residual_rms / 0.5) ** 2) if np.isfinite(motion.residual_rms) else 0.0
-    q = float(np.clip(support * fit, 0.0, 1.0))
+        support = min(1.0, motion.inliers / max(0.5 * n, 1.0))
+        support *= min(max(float(field.confidence.sum()) / n / 0.5, 0.0), 1.0)  # type: ignore[union-attr]
+    rms = motion.residual_rms
+    fit = 1.0 / (1.0 + (rms / 0.5) ** 2) if math.isfinite(rms) else 0.0
+    q = min(max(support * fit, 0.0), 1.0)
     reason = "" if q >= 0.3 else ("little texture or few confident blocks" if support < 0.5 else "flow disagrees with a rigid motion")
     return q, reason
 

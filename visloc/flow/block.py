@@ -101,6 +101,20 @@ def _groups(ii: NDArray, img: NDArray[np.uint8], step: int, rows: int, cols: int
             _band_sums(ii.T, img.T, sx, step, cols // step, rows))
 
 
+def _global_profiles(ii: NDArray, y0: int, y1: int, x0: int, x1: int, rows: int, cols: int,
+                     gradient: bool) -> tuple[NDArray, NDArray]:
+    """Column sums over rows ``y0 .. y1 - 1`` (x profile, ``cols`` long) and row sums over
+    columns ``x0 .. x1 - 1`` (y profile, ``rows`` long) from a summed-area table, as float32,
+    differentiated if asked."""
+    out = []
+    for cum in (ii[y1, : cols + 1] - ii[y0, : cols + 1], ii[: rows + 1, x1] - ii[: rows + 1, x0]):
+        prof = cum[1:] - cum[:-1]
+        if gradient:
+            prof = prof[1:] - prof[:-1]
+        out.append(prof.astype(np.float32))
+    return out[0], out[1]
+
+
 def _global_shift(p: NDArray, q: NDArray, search: int) -> int:
     """Integer d in [-S, S] minimising the sum of squared differences of the central part
     ``p[S : n - S]`` of ``p`` and ``q`` taken ``d`` further along (``S = min(search, n // 3)``):
@@ -271,11 +285,8 @@ def block_flow(
     # profile of a band by its length times the angle, so the band is kept short
     ny, nx = len(gxa), len(gya)
     r0, r1, c0, c1 = ny // 3, ny - ny // 3, nx // 3, nx - nx // 3
-    ga = (gxa[r0:r1].sum(axis=0), gya[c0:c1].sum(axis=0))  # sums over the same rows (columns) as gb
-    gb = (_band_sums(ib, b_img, r0 * stp, (r1 - r0) * stp, 1, cols)[0],
-          _band_sums(ib.T, b_img.T, c0 * stp, (c1 - c0) * stp, 1, rows)[0])
-    if grad:
-        ga, gb = tuple(v[1:] - v[:-1] for v in ga), tuple(v[1:] - v[:-1] for v in gb)
+    ga = _global_profiles(ia, r0 * stp, r1 * stp, c0 * stp, c1 * stp, rows, cols, grad)
+    gb = _global_profiles(ib, r0 * stp, r1 * stp, c0 * stp, c1 * stp, rows, cols, grad)
     sx = _global_shift(ga[0], gb[0], gsrch)
     sy = _global_shift(ga[1], gb[1], gsrch)
     gxb, gyb = _groups(ib, b_img, stp, rows, cols, sx, sy)
@@ -305,5 +316,5 @@ def block_flow(
     ratio = ratio.reshape(2, -1).max(axis=0)
     half = texture.size // 2
     ref = float(np.partition(texture, half)[half]) if texture.size else 0.0  # median
-    conf = np.maximum(1.0 - ratio, 0.0) * (np.minimum(texture / ref, 1.0) if ref > 0 else 0.0)
+    conf = (1.0 - ratio) * (np.minimum(texture / ref, 1.0) if ref > 0 else 0.0)  # ratio is in [0, 1]
     return FlowField(lay.centers, disp.T.astype(np.float64), conf.astype(np.float64), bsz, (w, h))

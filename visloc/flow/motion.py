@@ -29,29 +29,17 @@ def _image_center(field: FlowField) -> NDArray[np.float64]:
     return np.array([(w - 1) / 2.0, (h - 1) / 2.0])
 
 
-def _moments(p: NDArray, q: NDArray) -> NDArray:
-    """Per point (N, 8): 1, p, q, |p|^2, p.q, p x q: the sums :func:`_similarity_from_sums` needs."""
-    m = np.empty((len(p), 8))
-    m[:, 0] = 1.0
-    m[:, 1:3] = p
-    m[:, 3:5] = q
-    pq = p[:, :, None] * q[:, None, :]  # (N, 2, 2): px qx, px qy, py qx, py qy
-    np.vecdot(p, p, out=m[:, 5])
-    np.add(pq[:, 0, 0], pq[:, 1, 1], out=m[:, 6])
-    np.subtract(pq[:, 0, 1], pq[:, 1, 0], out=m[:, 7])
-    return m
-
-
-def _similarity_from_sums(m: NDArray) -> tuple[float, float, float, float]:
-    """(a, b, tx, ty) of the weighted similarity from the weighted sums of :func:`_moments`
-    (centred by subtracting the weighted means)."""
-    sw, spx, spy, sqx, sqy, spp, spq, sxq = m.tolist()
+def _similarity_from_gram(g: NDArray) -> tuple[float, float, float, float]:
+    """(a, b, tx, ty) of the weighted least-squares similarity ``q = [[a, -b], [b, a]] p + t``
+    from the weighted Gram matrix ``g = X^T W X`` (5, 5) of the rows ``X = [1, px, py, qx, qy]``
+    (moments centred by subtracting the weighted means)."""
+    (sw, spx, spy, sqx, sqy), (_, sxx, sxy, sxqx, sxqy), (_, _, syy, syqx, syqy) = g[:3].tolist()
     mpx, mpy, mqx, mqy = spx / sw, spy / sw, sqx / sw, sqy / sw
-    den = spp - sw * (mpx * mpx + mpy * mpy)
+    den = sxx + syy - sw * (mpx * mpx + mpy * mpy)
     if den <= 1e-12:  # all points at one place: translation only
         return 1.0, 0.0, mqx - mpx, mqy - mpy
-    a = (spq - sw * (mpx * mqx + mpy * mqy)) / den
-    b = (sxq - sw * (mpx * mqy - mpy * mqx)) / den
+    a = (sxqx + syqy - sw * (mpx * mqx + mpy * mqy)) / den
+    b = (sxqy - syqx - sw * (mpx * mqy - mpy * mqx)) / den
     return a, b, mqx - (a * mpx - b * mpy), mqy - (b * mpx + a * mpy)
 
 
@@ -62,35 +50,37 @@ def similarity_fit(field: FlowField, *, min_confidence: float = 0.2, iterations:
     3 times the robust spread (1.4826 x the median residual, at least 0.1 px) are dropped,
     until the set of blocks no longer changes.
     """
-    c0 = _image_center(field)
+    w, h = field.image_size
+    c0 = ((w - 1) / 2.0, (h - 1) / 2.0)
     use = field.confidence >= min_confidence
     n_use = int(np.count_nonzero(use))
     if n_use < 3:
         return _no_motion(field, "similarity")
-    p = field.centers - c0
-    q = p + field.vectors
-    moments = _moments(p, q)
-    wt = field.confidence
+    x = np.empty((len(use), 5))  # rows [1, p, q]: p the block centre about the image centre, q = p + flow
+    x[:, 0] = 1.0
+    p = np.subtract(field.centers, c0, out=x[:, 1:3])
+    q = np.add(p, field.vectors, out=x[:, 3:5])
+    wt = field.confidence * use
     keep, n_keep = use, n_use
     for _ in range(iterations):
-        a, b, tx, ty = _similarity_from_sums((wt * keep) @ moments)
+        a, b, tx, ty = _similarity_from_gram((x * wt[:, None]).T @ x)
         res = p @ np.array([[a, b], [-b, a]]) - q
         res += (tx, ty)
         r2 = np.vecdot(res, res)
-        kept = r2[keep]
-        med2 = float(np.partition(kept, n_keep // 2)[n_keep // 2])  # median of squares
+        med2 = float(np.partition(r2[keep], n_keep // 2)[n_keep // 2])  # median of squares
         limit = 9.0 * max(1.4826**2 * med2, 0.01)  # (3 x spread)^2
         new = use & (r2 <= limit)
         n_new = int(np.count_nonzero(new))
         if n_new < 3 or n_new == n_keep and np.array_equal(new, keep):
             break
         keep, n_keep = new, n_new
+        wt = wt * keep
     rms = math.sqrt(float(r2 @ keep) / n_keep)
     return GlobalMotion(np.array([tx, ty]), math.atan2(b, a), math.hypot(a, b), _rotation_centre(a, b, tx, ty, c0),
                         rms, n_keep, "similarity")
 
 
-def _rotation_centre(a: float, b: float, tx: float, ty: float, c0: NDArray) -> NDArray | None:
+def _rotation_centre(a: float, b: float, tx: float, ty: float, c0: tuple[float, float]) -> NDArray | None:
     """Fixed point of the motion (in image coordinates), or None for a (near) pure
     translation, whose centre is at infinity."""
     am1 = a - 1.0  # solve [[a - 1, -b], [b, a - 1]] c = -t in closed form

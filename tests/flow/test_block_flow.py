@@ -70,7 +70,7 @@ def test_bad_options():
 
 
 def test_band_means_match_a_replicate_padded_reference():
-    # the band means come from a summed-area table; bands shifted past the frame repeat its
+    # the band sums come from a summed-area table; bands shifted past the frame repeat its
     # edge rows and columns, as cv2.BORDER_REPLICATE padding would
     import cv2
 

@@ -33,7 +33,7 @@ def _similarity_from_gram(g: NDArray) -> tuple[float, float, float, float]:
     """(a, b, tx, ty) of the weighted least-squares similarity ``q = [[a, -b], [b, a]] p + t``
     from the weighted Gram matrix ``g = X^T W X`` (5, 5) of the rows ``X = [1, px, py, qx, qy]``
     (moments centred by subtracting the weighted means)."""
-    (sw, spx, spy, sqx, sqy), (_, sxx, sxy, sxqx, sxqy), (_, _, syy, syqx, syqy) = g[:3].tolist()
+    (sw, spx, spy, sqx, sqy), (_, sxx, _, sxqx, sxqy), (_, _, syy, syqx, syqy) = g[:3].tolist()
     mpx, mpy, mqx, mqy = spx / sw, spy / sw, sqx / sw, sqy / sw
     den = sxx + syy - sw * (mpx * mpx + mpy * mpy)
     if den <= 1e-12:  # all points at one place: translation only

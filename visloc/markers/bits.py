@@ -77,7 +77,7 @@ def _unit_grid(n: int) -> NDArray[np.float64]:
     return np.stack([x.ravel(), y.ravel()], axis=1) / n
 
 
-_GRIDS: dict[int, NDArray[np.float64]] = {}
+_GRIDS: dict[int, NDArray[np.float32]] = {}  # (3, S) sample points u, v, 1 per cell count
 
 
 def sample_cells(gray: NDArray[np.uint8], quads: NDArray, n: int) -> CellSample:
@@ -97,13 +97,13 @@ def sample_cells(gray: NDArray[np.uint8], quads: NDArray, n: int) -> CellSample:
     if len(q) == 0:
         return CellSample(np.zeros((0, n, n)), np.zeros((0, 4 * n + 4)))
     if n not in _GRIDS:
-        _GRIDS[n] = _unit_grid(n)
-    uv = _GRIDS[n]
-    H = square_to_quad(q)
-    hom = uv @ H[:, :, :2].transpose(0, 2, 1) + H[:, None, :, 2]
-    xy = (hom[..., :2] / hom[..., 2:3]).astype(np.float32)  # (K, S, 2)
-    vals = cv2.remap(gray, xy[..., 0], xy[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    vals = vals.reshape(len(q), -1, 9).mean(axis=2)
+        uv = _unit_grid(n)
+        _GRIDS[n] = np.vstack([uv.T, np.ones(len(uv))]).astype(np.float32)
+    uv1 = _GRIDS[n]  # (3, S): u, v, 1
+    hom = (square_to_quad(q).reshape(-1, 3).astype(np.float32) @ uv1).reshape(len(q), 3, -1)  # (K, 3, S)
+    mx, my = hom[:, 0] / hom[:, 2], hom[:, 1] / hom[:, 2]
+    vals = cv2.remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    vals = vals.reshape(len(q), -1, 9).sum(axis=2, dtype=np.float64) / 9.0
     return CellSample(vals[:, : n * n].reshape(-1, n, n), vals[:, n * n :])
 
 

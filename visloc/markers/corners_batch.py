@@ -7,8 +7,9 @@ intersections), written over a padded ``(K, N_max)`` array of all candidates of 
 that the per-candidate Python work disappears. Each step mirrors its single-contour
 counterpart:
 
-- :func:`radial_profile`: centre, distance, Gaussian smoothing with ``sigma = max(1, N / 100)``
-  (per contour) by gathering the ``2 r + 1`` circular neighbours;
+- :func:`radial_profile` at every :func:`~visloc.markers.corners.profile_stride`-th point:
+  centre, distance, Gaussian smoothing with ``sigma = max(1, N / 100)`` (per contour) by
+  gathering the ``2 r + 1`` circular neighbours;
 - :func:`radial_peaks`: local maxima (``d > prev`` and ``d >= next``); greedy selection in
   height order with a circular gap of ``max(2, N // 16)``, done as "take the highest
   remaining maximum, drop the ones within the gap" until none remain; prominence above the
@@ -20,6 +21,7 @@ counterpart:
 from __future__ import annotations
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import NDArray
 
 from visloc.markers.corners import _NEXT, RadialSplit, fit_lines, quad_from_lines
@@ -33,23 +35,24 @@ def _pack(contours: list[NDArray]) -> tuple[NDArray, NDArray, NDArray]:
     """Points (K, M, 2) wrapped circularly beyond each contour's length, lengths (K,), mask."""
     n = np.array([len(c) for c in contours])
     m = int(n.max())
-    flat = np.concatenate([np.asarray(c, np.float64).reshape(-1, 2) for c in contours])
+    flat = np.concatenate([np.asarray(c).reshape(-1, 2) for c in contours]).astype(np.float64)
     start = np.concatenate([[0], np.cumsum(n)[:-1]])
     j = np.arange(m)
     idx = start[:, None] + j[None, :] % n[:, None]
     return flat[idx], n, j[None, :] < n[:, None]
 
 
-def _circular(values: NDArray, n: NDArray, offsets: NDArray) -> NDArray:
-    """``values[k, (j + offsets) mod n_k]`` (K, M, len(offsets))."""
-    j = np.arange(values.shape[1])
-    idx = (j[None, :, None] + offsets[None, None, :]) % n[:, None, None]
-    return values[np.arange(len(values))[:, None, None], idx]
+def _circular(values: NDArray, n: NDArray, r: int) -> NDArray:
+    """Read-only view (K, M, 2 r + 1) of ``values[k, (j + o) mod n_k]`` for o = -r .. r: each
+    row extended circularly by r on both sides once, then windowed."""
+    m = values.shape[1]
+    ext = values[np.arange(len(values))[:, None], (np.arange(-r, m + r)[None, :]) % n[:, None]]
+    return sliding_window_view(ext, 2 * r + 1, axis=1)
 
 
-def _smooth(dist: NDArray, n: NDArray, sigma: float | None) -> NDArray:
+def _smooth(dist: NDArray, n: NDArray, sigma: float | NDArray | None) -> NDArray:
     """Circular Gaussian smoothing of each row (report App. G), as :func:`radial_profile`."""
-    s = np.maximum(1.0, n / 100.0) if sigma is None else np.full(len(n), float(sigma))
+    s = np.maximum(1.0, n / 100.0) if sigma is None else np.broadcast_to(np.asarray(sigma, np.float64), n.shape)
     r = np.minimum(np.ceil(3 * s).astype(int), (n - 1) // 2)
     rmax = int(r.max())
     if rmax < 1:
@@ -57,7 +60,7 @@ def _smooth(dist: NDArray, n: NDArray, sigma: float | None) -> NDArray:
     x = np.arange(-rmax, rmax + 1)
     k = np.exp(-0.5 * (x[None, :] / s[:, None]) ** 2) * (np.abs(x)[None, :] <= r[:, None])
     k /= k.sum(axis=1, keepdims=True)
-    out = (_circular(dist, n, x) * k[:, None, :]).sum(axis=2)
+    out = np.einsum("kmo,ko->km", _circular(dist, n, rmax), k)
     return np.where(r[:, None] >= 1, out, dist)
 
 
@@ -71,6 +74,7 @@ def _peaks(d: NDArray, n: NDArray, valid: NDArray, count: int = 4) -> tuple[NDAr
     is_max = valid & (d > prev) & (d >= nxt)
     ok = is_max.sum(axis=1) >= count
     gap = np.maximum(2, n // 16)
+    # a maximum with a higher one (or an equal one before it) closer than the gap is dropped
     avail = np.where(is_max, d, _NEG)
     chosen = np.zeros((k, m), bool)
     while True:  # greedy in height order: take the highest, drop those within the gap
@@ -147,10 +151,17 @@ def fit_quads(
         return np.zeros((0, 4, 2)), np.zeros(0, bool), [] if splits else None
     pts, n, valid = _pack(contours)
     rows = np.arange(k)
-    center = np.where(valid[..., None], pts, 0.0).sum(axis=1) / n[:, None]  # report App. G
-    dist = np.hypot(pts[..., 0] - center[:, 0:1], pts[..., 1] - center[:, 1:2])
-    smooth = _smooth(dist, n, sigma)
-    peaks, ok = _peaks(smooth, n, valid)
+    # the radial profile at every f-th point (corners.profile_stride)
+    f = np.maximum(1, n // 128)
+    nf = (n + f - 1) // f
+    jf = np.arange(int(nf.max()))
+    pts_f = pts[rows[:, None], (jf[None, :] * f[:, None]) % n[:, None]]
+    valid_f = jf[None, :] < nf[:, None]
+    center = np.where(valid_f[..., None], pts_f, 0.0).sum(axis=1) / nf[:, None]  # report App. G
+    dist = np.hypot(pts_f[..., 0] - center[:, 0:1], pts_f[..., 1] - center[:, 1:2])
+    smooth = _smooth(dist, nf, None if sigma is None else sigma / f)
+    peaks, ok = _peaks(np.round(smooth, 9), nf, valid_f)  # as radial_peaks: no peak decided by rounding noise
+    peaks = peaks * f[:, None]
     if hints is not None:
         h = np.asarray(hints, np.float64)
         miss = ~ok
@@ -193,6 +204,9 @@ def fit_quads(
             ni = int(n[i])
             groups = [(int(a[i, s]) + np.arange(int(pad[i, s]), int(length[i, s]) - int(pad[i, s]) + 1)) % ni
                       for s in range(4)]
-            out_splits.append(RadialSplit(center[i], dist[i, :ni].copy(), smooth[i, :ni].copy(),
-                                          peaks[i].copy(), groups))
+            fi = int(f[i])
+            full = np.hypot(pts[i, :ni, 0] - center[i, 0], pts[i, :ni, 1] - center[i, 1])
+            sm = smooth[i, : int(nf[i])]
+            sm = np.interp(np.arange(ni), np.arange(0, ni, fi), sm, period=ni) if fi > 1 else sm.copy()
+            out_splits.append(RadialSplit(center[i], full, sm, peaks[i].copy(), groups))
     return corners, ok, out_splits

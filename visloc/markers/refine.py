@@ -56,11 +56,12 @@ def sample_edge_profiles(
     normals = np.stack([u[..., 1], -u[..., 0]], axis=-1)  # clockwise quad, y down: outward
     t = np.linspace(end_gap, 1 - end_gap, count)
     base = q[:, :, None, :] + t[None, None, :, None] * d[:, :, None, :]
-    s = np.arange(-radius, radius + 1, dtype=np.float64)
-    pts = base[..., None, :] + s[:, None] * normals[:, :, None, None, :]
+    s = np.arange(-radius, radius + 1, dtype=np.float32)
     k = len(q)
-    mx = pts[..., 0].astype(np.float32).reshape(k * 4 * count, -1)
-    my = pts[..., 1].astype(np.float32).reshape(k * 4 * count, -1)
+    b32 = base.astype(np.float32)
+    n32 = normals.astype(np.float32)
+    mx = (b32[..., 0, None] + s * n32[:, :, None, 0, None]).reshape(k * 4 * count, -1)
+    my = (b32[..., 1, None] + s * n32[:, :, None, 1, None]).reshape(k * 4 * count, -1)
     prof = cv2.remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     return base, normals, prof.astype(np.float32).reshape(k, 4, count, -1)
 

@@ -168,16 +168,21 @@ def fit_lines(points: NDArray, weights: NDArray | None = None) -> NDArray[np.flo
     p = np.asarray(points, np.float64)
     w = np.ones(p.shape[:2]) if weights is None else np.asarray(weights, np.float64)
     sw = np.maximum(w.sum(axis=1), 1e-12)
-    m = (w[..., None] * p).sum(axis=1) / sw[:, None]
-    qx = p[..., 0] - m[:, 0:1]
-    qy = p[..., 1] - m[:, 1:2]
+    x, y = p[..., 0], p[..., 1]
+    mx = np.vecdot(w, x) / sw  # weighted centroid
+    my = np.vecdot(w, y) / sw
+    qx = x - mx[:, None]
+    qy = y - my[:, None]
     wqx = w * qx
-    sxx = (wqx * qx).sum(axis=1)
-    syy = (w * qy * qy).sum(axis=1)
-    sxy = (wqx * qy).sum(axis=1)
+    sxx = np.vecdot(wqx, qx)
+    syy = np.vecdot(w * qy, qy)
+    sxy = np.vecdot(wqx, qy)
     theta = 0.5 * np.arctan2(2 * sxy, sxx - syy)  # direction of the major axis
-    a, b = -np.sin(theta), np.cos(theta)
-    return np.stack([a, b, a * m[:, 0] + b * m[:, 1]], axis=1)
+    out = np.empty((len(p), 3))
+    out[:, 0] = -np.sin(theta)
+    out[:, 1] = np.cos(theta)
+    out[:, 2] = out[:, 0] * mx + out[:, 1] * my
+    return out
 
 
 def intersect_lines(l1: NDArray, l2: NDArray) -> NDArray[np.float64]:

@@ -380,9 +380,12 @@ def _merge_duplicates(found: list[tuple[MarkerDetection, float]]) -> list[Marker
         area = np.array([a for _, a in found])
         c = np.array([d.corners for d, _ in found]).mean(axis=1)
         d2 = ((c[:, None, :] - c[None, :, :]) ** 2).sum(axis=2)
-        dup = (ids[:, None] == ids[None, :]) & (d2 < 0.25 * np.minimum(area[:, None], area[None, :]))
-        for i in range(len(found)):
-            if not kept or not dup[i, kept].any():
-                kept.append(i)
+        dup = np.tril((ids[:, None] == ids[None, :]) & (d2 < 0.25 * np.minimum(area[:, None], area[None, :])), -1)
+        if not dup.any():  # the common case: every marker found once
+            kept = list(range(len(found)))
+        else:
+            for i in range(len(found)):
+                if not kept or not dup[i, kept].any():
+                    kept.append(i)
     dets = [found[i][0] for i in kept]
     return sorted(dets, key=lambda d: (d.id, d.corners[0, 1], d.corners[0, 0]))

@@ -15,6 +15,8 @@ batches (one OpenCV remap per pass for all markers of a frame).
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import cv2
 import numpy as np
 from numpy.typing import NDArray
@@ -22,6 +24,14 @@ from numpy.typing import NDArray
 from visloc.markers.corners import _NEXT, fit_lines, quad_from_lines
 
 __all__ = ["edge_offsets", "refine_quads", "sample_edge_profiles"]
+
+
+@lru_cache(maxsize=32)
+def _positions(count: int, end_gap: float) -> NDArray[np.float64]:
+    """Fractions along a side where its ``count`` profiles are taken (read-only, cached)."""
+    t = np.linspace(end_gap, 1 - end_gap, count)
+    t.setflags(write=False)
+    return t
 
 
 def sample_edge_profiles(
@@ -54,7 +64,7 @@ def sample_edge_profiles(
     d = q[:, _NEXT] - q
     u = d / np.maximum(np.hypot(d[..., 0], d[..., 1]), 1e-9)[..., None]
     normals = np.stack([u[..., 1], -u[..., 0]], axis=-1)  # clockwise quad, y down: outward
-    t = np.linspace(end_gap, 1 - end_gap, count)
+    t = _positions(count, end_gap)
     base = q[:, :, None, :] + t[None, None, :, None] * d[:, :, None, :]
     s = np.arange(-radius, radius + 1, dtype=np.float32)
     k = len(q)
@@ -118,7 +128,7 @@ def refine_quads(
     if (r < 1).any():
         raise ValueError(f"radius must be >= 1, got {radius}")
     big = int(r.max())
-    inside = (np.abs(np.arange(-big, big + 1))[None, :] <= r[:, None])[:, None, None, :]
+    inside = (np.abs(np.arange(-big, big + 1))[None, :] <= r[:, None]).astype(np.float32)[:, None, None, :]
     kk = np.arange(k)
     r4 = r[:, None, None].astype(np.float64)
     max_move = 2.0 * r + 1
@@ -131,8 +141,11 @@ def refine_quads(
         lo = np.partition(p_in.reshape(k, -1), half, axis=1)[:, half]
         hi = np.partition(p_out.reshape(k, -1), half, axis=1)[:, half]
         span = np.maximum(hi - lo, 1e-6)[:, None, None, None]
-        v = np.clip((prof - lo[:, None, None, None]) / span, 0.0, 1.0)
-        e = r4 + 0.5 - (v * inside).sum(axis=-1)  # module docstring: area of the normalised step
+        v = prof  # normalised in place: (I - black) / (white - black), clipped to [0, 1]
+        v -= lo[:, None, None, None]
+        v /= span
+        np.clip(v, 0.0, 1.0, out=v)
+        e = r4 + 0.5 - np.vecdot(v, inside)  # module docstring: area of the normalised step
         # profiles that did not cross a clean step (occlusion, neighbouring edge) are outliers
         good = ((p_out - p_in) > 0.5 * (hi - lo)[:, None, None]) & (np.abs(e) < r4)
         pts = (base + e[..., None] * normals[:, :, None, :]).reshape(k * 4, count, 2)

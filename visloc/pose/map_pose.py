@@ -147,7 +147,7 @@ def estimate_camera_pose(
         return None
     ids = [int(d.id) for d in known]
     obj = np.stack([marker_map.corners_of(i) for i in ids])  # (M, 4, 3)
-    xy = np.stack([camera.normalize(d.corners) for d in known])  # (M, 4, 2)
+    xy = camera.normalize(np.concatenate([d.corners for d in known])).reshape(-1, 4, 2)  # (M, 4, 2)
     f = np.array([[camera.fx], [camera.fy]])
     # start: the own poses (and their flips) of the largest markers in the image, moved into the
     # map frame; the one that reprojects all map corners best
@@ -167,7 +167,7 @@ def estimate_camera_pose(
                 starts.append(_params_of(T_cam_map.R, T_cam_map.t))
     if not starts:
         return None
-    fit = [float(np.mean(_marker_rms(s, obj, xy, f) ** 2)) for s in starts]
+    fit = (_marker_rms(np.array(starts), obj, xy, f) ** 2).mean(axis=-1)  # per start
     keep = np.ones(len(ids), bool)
     rejected: list[int] = []
     params = np.array(starts[int(np.argmin(fit))])[None]
@@ -203,13 +203,16 @@ def _area(corners: FloatArray) -> float:
 
 
 def _marker_rms(params: FloatArray, obj: FloatArray, xy: FloatArray, f: FloatArray) -> FloatArray:
-    """RMS reprojection error (px) of each marker's four corners under ``params``."""
-    R = euler_to_matrix(params[3:])
-    q = obj @ R.T + params[:3]  # (M, 4, 3)
+    """RMS reprojection error (px) of each marker's four corners under ``params`` (6,), or
+    under each of several parameter vectors (S, 6): (M,) or (S, M)."""
+    params = np.asarray(params, np.float64)
+    R = euler_to_matrix(params)  # (..., 3, 3)
+    pts = obj.reshape(-1, 3)
+    q = pts @ np.swapaxes(R, -1, -2) + params[..., None, :3]  # (..., 4M, 3)
     z = np.where(q[..., 2] > 1e-9, q[..., 2], np.nan)
     uv = q[..., :2] / z[..., None]
-    d = (uv - xy) * f[:, 0]
-    rms = np.sqrt(np.mean((d * d).sum(axis=-1), axis=-1))
+    d = (uv - xy.reshape(-1, 2)) * f[:, 0]
+    rms = np.sqrt(np.vecdot(d, d).reshape(*params.shape[:-1], -1, 4).mean(axis=-1))
     return np.where(np.isfinite(rms), rms, np.inf)
 
 

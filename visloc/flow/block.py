@@ -207,7 +207,7 @@ def _layout(rows: int, cols: int, bsz: int, stp: int, srch: int, lx: int, ly: in
 
 
 class _Search(NamedTuple):
-    shift: NDArray  # (S,) the global shift of each segment's direction
+    moved: NDArray  # (S, D) the displacement each shift stands for: global shift + offset
     pos: NDArray  # (S, D) where each segment is compared in the second frame (clamped)
     ok: NDArray  # (S, D) False where that position leaves the profile
 
@@ -222,9 +222,10 @@ def _search(key: tuple[int, ...], sx: int, sy: int) -> _Search:
     ok = (pos >= 0) & (pos <= lay.limit[:, None])
     ok[:, [0, -1]] = False  # the shifts just beyond the search range: see _best_shifts
     pos = np.minimum(np.maximum(pos, 0), lay.limit[:, None])
-    for arr in (shift, pos, ok):
+    moved = (shift[:, None] + lay.d[None, :]).astype(np.float64)
+    for arr in (moved, pos, ok):
         arr.setflags(write=False)
-    return _Search(shift, pos, ok)
+    return _Search(moved, pos, ok)
 
 
 def block_flow(
@@ -302,7 +303,7 @@ def block_flow(
         _profile(gx, k, grad, P[i, :nby, :lx])  # (nby, Lx)
         _profile(gy, k, grad, P[i, nby:, :ly])  # (nbx, Ly)
     P, Q = P
-    shift, pos, ok = _search(key, sx, sy)  # where each segment may be in the second frame
+    moved, pos, ok = _search(key, sx, sy)  # where each segment may be in the second frame
     p_seg = _windows(P, seg_len)[lay.band, lay.start]  # (S, L)
     q_seg = _windows(Q, seg_len)[lay.band[:, None], pos]  # (S, D, L)
     if not grad:
@@ -311,10 +312,10 @@ def block_flow(
     diff = q_seg - p_seg[:, None, :]
     cost = np.where(ok, np.vecdot(diff, diff), _BIG)
     best, off, ratio = _best_shifts(cost, p_seg, q_seg, lay.rows)
-    disp = (shift + lay.d[best] + off).reshape(2, -1)
+    disp = moved[lay.rows, best] + off  # (S,): x segments, then y segments
     texture = np.vecdot(p_seg, p_seg).reshape(2, -1).min(axis=0)
     ratio = ratio.reshape(2, -1).max(axis=0)
     half = texture.size // 2
     ref = float(np.partition(texture, half)[half]) if texture.size else 0.0  # median
     conf = (1.0 - ratio) * (np.minimum(texture / ref, 1.0) if ref > 0 else 0.0)  # ratio is in [0, 1]
-    return FlowField(lay.centers, disp.T.astype(np.float64), conf.astype(np.float64), bsz, (w, h))
+    return FlowField(lay.centers, disp.reshape(2, -1).T.copy(), conf.astype(np.float64), bsz, (w, h))

@@ -59,13 +59,12 @@ def similarity_fit(field: FlowField, *, min_confidence: float = 0.2, iterations:
     x = np.empty((len(use), 5))  # rows [1, p, q]: p the block centre about the image centre, q = p + flow
     x[:, 0] = 1.0
     p = np.subtract(field.centers, c0, out=x[:, 1:3])
-    q = np.add(p, field.vectors, out=x[:, 3:5])
+    np.add(p, field.vectors, out=x[:, 3:5])  # q
     wt = field.confidence * use
     keep, n_keep = use, n_use
     for _ in range(iterations):
         a, b, tx, ty = _similarity_from_gram((x * wt[:, None]).T @ x)
-        res = p @ np.array([[a, b], [-b, a]]) - q
-        res += (tx, ty)
+        res = x @ np.array([[tx, ty], [a, b], [-b, a], [-1.0, 0.0], [0.0, -1.0]])  # model - q
         r2 = np.vecdot(res, res)
         med2 = float(np.partition(r2[keep], n_keep // 2)[n_keep // 2])  # median of squares
         limit = 9.0 * max(1.4826**2 * med2, 0.01)  # (3 x spread)^2

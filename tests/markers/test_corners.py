@@ -99,3 +99,23 @@ def test_fit_quad_uses_the_hint_when_a_peak_is_missing():
     quad = res[0]
     best = min(np.abs(np.roll(quad, k, axis=0) - truth).max() for k in range(4))
     assert best < 1.0
+
+
+@pytest.mark.parametrize("angle", [7.0, 38.0])
+def test_fit_quad_on_a_long_contour_profiled_at_a_stride(angle):
+    # a 260-px square: its 800-1000-point contour is profiled at every 6th-8th point
+    # (profile_stride); the peaks still split the sides and the corners stay within the
+    # binary contour's accuracy
+    from visloc.markers.corners import profile_stride
+
+    c = np.array([200.0, 190.0])
+    a = np.deg2rad(angle)
+    rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    truth = c + np.array([[-130, -130], [130, -130], [130, 130], [-130, 130.0]]) @ rot.T
+    img = render_square((400, 380), truth, supersample=2, blur=0.6)
+    contour = max(find_contours(threshold(img, window=11, offset=7)), key=len).reshape(-1, 2)
+    assert profile_stride(len(contour)) >= 6
+    quad, split = fit_quad(contour)
+    best = min(np.abs(np.roll(quad, k, axis=0) - truth).max() for k in range(4))
+    assert best < 0.75
+    assert len(split.distance) == len(split.smoothed) == len(contour)

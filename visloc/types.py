@@ -29,6 +29,7 @@ Units
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -265,11 +266,12 @@ class GlobalMotion:
     method: str
 
     def displacement_at(self, point: FloatArray, image_center: FloatArray) -> FloatArray:
-        """Content displacement (2,) at ``point`` (px) under this motion."""
-        c, s = np.cos(self.rotation) * self.scale, np.sin(self.rotation) * self.scale
-        r = np.asarray(point, float) - image_center
-        moved = np.array([c * r[0] - s * r[1], s * r[0] + c * r[1]])
-        return moved - r + self.translation
+        """Content displacement (2,) at ``point`` (px) under this motion, ``image_center``
+        being the point its translation refers to."""
+        x, y = float(point[0]) - float(image_center[0]), float(point[1]) - float(image_center[1])
+        c, s = math.cos(self.rotation) * self.scale, math.sin(self.rotation) * self.scale
+        tx, ty = float(self.translation[0]), float(self.translation[1])
+        return np.array([c * x - s * y - x + tx, s * x + c * y - y + ty])
 
 
 @dataclass(frozen=True, eq=False)

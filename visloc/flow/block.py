@@ -8,13 +8,14 @@ Per block: the column sums of its rows give an x profile, the row sums of its co
 profile (in ``"gradient"`` mode their derivative, as EdgeFlow does, which ignores brightness
 offsets; in ``"intensity"`` mode the sums with each window's mean removed, as the report
 does). Each profile of the first frame is matched against the second frame's by the sum of
-squared differences over a search range; a parabola through the cost minimum gives the
-sub-pixel shift. First the whole image's profiles are matched over a wide range, and the
-second frame's bands are taken that much further along, so each block searches only a small
-range around the global shift: fast motion stays in reach at little cost. (The global match
-uses the central third of the image only: far from the centre a yaw rotation moves the
-content across the bands and smears the long profiles.) Band sums come
-from ``cv2.resize(INTER_AREA)``; all blocks and both directions are matched in one batch.
+squared differences over a search range; a Gauss-Newton step on the profile around the cost
+minimum gives the sub-pixel shift. First the whole image's profiles are matched over a wide
+range, and the second frame's bands are taken that much further along, so each block searches
+only a small range around the global shift: fast motion stays in reach at little cost. (The
+global match uses the central third of the image only: far from the centre a yaw rotation
+moves the content across the bands and smears the long profiles.) All band sums, shifted or
+not, are read off one summed-area table (``cv2.integral``) per frame; all blocks and both
+directions are matched in one batch.
 """
 
 from __future__ import annotations
@@ -184,7 +185,7 @@ class _Layout(NamedTuple):
     is_x: NDArray  # (S,) x segments first, then y segments
     d: NDArray  # (D,) search offsets, one beyond the range at each end
     centers: NDArray  # (N, 2) block centres
-    rows: NDArray  # (S,) 0 .. S - 1
+    index: NDArray  # (S,) 0 .. S - 1, the segments' own indices
 
 
 @lru_cache(maxsize=16)
@@ -200,10 +201,10 @@ def _layout(rows: int, cols: int, bsz: int, stp: int, srch: int, lx: int, ly: in
     limit = np.concatenate([np.full(n, lx - seg_len), np.full(n, ly - seg_len)])
     is_x = np.arange(2 * n) < n
     centers = (np.stack([xs[cc.ravel()], ys[rr.ravel()]], axis=1) + (bsz - 1) / 2.0).astype(np.float64)
-    rows_ = np.arange(2 * n)
-    for arr in (band, start, limit, is_x, centers, rows_):
+    index = np.arange(2 * n)
+    for arr in (band, start, limit, is_x, centers, index):
         arr.setflags(write=False)
-    return _Layout(nby, nbx, max(lx, ly), band, start, limit, is_x, np.arange(-srch - 1, srch + 2), centers, rows_)
+    return _Layout(nby, nbx, max(lx, ly), band, start, limit, is_x, np.arange(-srch - 1, srch + 2), centers, index)
 
 
 class _Search(NamedTuple):
@@ -311,8 +312,8 @@ def block_flow(
         q_seg = q_seg - q_seg.mean(axis=2, keepdims=True)
     diff = q_seg - p_seg[:, None, :]
     cost = np.where(ok, np.vecdot(diff, diff), _BIG)
-    best, off, ratio = _best_shifts(cost, p_seg, q_seg, lay.rows)
-    disp = moved[lay.rows, best] + off  # (S,): x segments, then y segments
+    best, off, ratio = _best_shifts(cost, p_seg, q_seg, lay.index)
+    disp = moved[lay.index, best] + off  # (S,): x segments, then y segments
     texture = np.vecdot(p_seg, p_seg).reshape(2, -1).min(axis=0)
     ratio = ratio.reshape(2, -1).max(axis=0)
     half = texture.size // 2

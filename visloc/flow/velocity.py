@@ -87,10 +87,8 @@ def ground_velocity(
         w, hgt = field.image_size
     if w is None:
         raise ValueError("camera.size is unknown: pass the FlowField (field=...) or a camera with a size")
-    # content displacement at the principal point, px (GlobalMotion.displacement_at, in scalars)
-    rx, ry = camera.cx - (w - 1) / 2.0, camera.cy - (hgt - 1) / 2.0
-    c, s = math.cos(motion.rotation) * motion.scale, math.sin(motion.rotation) * motion.scale
-    dx, dy = c * rx - s * ry - rx + tx, s * rx + c * ry - ry + ty
+    # content displacement at the principal point, px
+    dx, dy = motion.displacement_at((camera.cx, camera.cy), ((w - 1) / 2.0, (hgt - 1) / 2.0)).tolist()
     if gyro is not None:
         g = np.asarray(gyro, np.float64).reshape(-1)
         if g.shape != (3,) or not np.isfinite(g).all():

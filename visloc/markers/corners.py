@@ -214,15 +214,16 @@ def orient_clockwise(quad: NDArray) -> NDArray:
     return quad if area2 > 0 else quad[[0, 3, 2, 1]]
 
 
-def profile_stride(n: int) -> int:
-    """Stride of the contour points the radial profile is taken at, for an ``n``-point contour.
+def profile_stride(n: int | NDArray) -> int | NDArray:
+    """Stride of the contour points the radial profile is taken at, for an ``n``-point contour
+    (or for each of an array of contour lengths).
 
     At least 128 samples remain, a dozen or more per side: plenty for a profile smoothed over
     1 % of the contour, whose peaks only need to fall inside the padding that
     :func:`split_sides` leaves out next to each corner; and the cost of the smoothing and the
     peak search no longer grows with the marker's size.
     """
-    return max(1, int(n) // 128)
+    return max(1, int(n) // 128) if np.isscalar(n) else np.maximum(1, np.asarray(n) // 128)
 
 
 def fit_quad(

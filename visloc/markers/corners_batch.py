@@ -24,7 +24,7 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import NDArray
 
-from visloc.markers.corners import _NEXT, RadialSplit, fit_lines, quad_from_lines
+from visloc.markers.corners import _NEXT, RadialSplit, fit_lines, profile_stride, quad_from_lines
 
 __all__ = ["fit_quads"]
 
@@ -74,7 +74,6 @@ def _peaks(d: NDArray, n: NDArray, valid: NDArray, count: int = 4) -> tuple[NDAr
     is_max = valid & (d > prev) & (d >= nxt)
     ok = is_max.sum(axis=1) >= count
     gap = np.maximum(2, n // 16)
-    # a maximum with a higher one (or an equal one before it) closer than the gap is dropped
     avail = np.where(is_max, d, _NEG)
     chosen = np.zeros((k, m), bool)
     while True:  # greedy in height order: take the highest, drop those within the gap
@@ -152,7 +151,7 @@ def fit_quads(
     pts, n, valid = _pack(contours)
     rows = np.arange(k)
     # the radial profile at every f-th point (corners.profile_stride)
-    f = np.maximum(1, n // 128)
+    f = profile_stride(n)
     nf = (n + f - 1) // f
     jf = np.arange(int(nf.max()))
     pts_f = pts[rows[:, None], (jf[None, :] * f[:, None]) % n[:, None]]

@@ -57,11 +57,9 @@ def frequency_response(
     if not isinstance(g, ControllerGains):
         raise TypeError(f"gains: expected ControllerGains, got {type(g).__name__}")
     name = loop_name(loop)
-    freqs = np.asarray(w, dtype=float)
-    if freqs.ndim != 1 or not np.all(np.isfinite(freqs)) or np.any(freqs <= 0):
-        raise ValueError(
-            f"w: expected a 1-D array of finite frequencies > 0 rad/s, got shape {freqs.shape}"
-        )
+    if w is None:
+        raise ValueError("w: expected a 1-D array of finite frequencies > 0 rad/s, got None")
+    freqs = _frequencies(w, min_size=1)
     s = 1j * freqs
     num, den = plant(name, params, g)
     k = g.loop(name)
@@ -70,13 +68,15 @@ def frequency_response(
     return {"plant": p, "controller": c, "open": c * p, "closed": c * p / (1.0 + c * p)}[part]
 
 
-def _frequencies(w: ArrayLike | None) -> FloatArray:
+def _frequencies(w: ArrayLike | None, min_size: int = 2) -> FloatArray:
+    """``w`` checked as a 1-D array of at least ``min_size`` finite frequencies > 0 rad/s;
+    ``None``: 600 points log-spaced over 0.01-1000 rad/s."""
     if w is None:
         return np.logspace(-2, 3, 600)
     arr = np.asarray(w, dtype=float)
-    if arr.ndim != 1 or arr.size < 2 or not np.all(np.isfinite(arr)) or np.any(arr <= 0):
+    if arr.ndim != 1 or arr.size < min_size or not np.all(np.isfinite(arr)) or np.any(arr <= 0):
         raise ValueError(
-            f"w: expected a 1-D array of >= 2 finite frequencies > 0 rad/s, got shape {arr.shape}"
+            f"w: expected a 1-D array of >= {min_size} finite frequencies > 0 rad/s, got shape {arr.shape}"
         )
     return arr
 

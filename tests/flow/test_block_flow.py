@@ -89,3 +89,28 @@ def test_band_means_match_a_replicate_padded_reference():
         gy = pad[m : m + rows, m + sx : m + sx + cols].reshape(rows, cols // step, step).mean(axis=2).T
         ax, ay = (v / step for v in _groups(_integral(img), img, step, rows, cols, sx, sy))
         assert np.abs(ax - gx).max() < 1e-3 and np.abs(ay - gy).max() < 1e-3
+
+
+@pytest.mark.parametrize("step", [20, 10])
+@pytest.mark.parametrize("mode", ["gradient", "intensity"])
+def test_overlapping_blocks_measure_the_shift(step, mode):
+    # overlapping blocks sum their costs over several step-long chunks of the profiles
+    a, b = moved(4.5, -2.25)
+    f = block_flow(a, b, block=40, step=step, mode=mode)
+    good = f.confidence > 0.2
+    assert good.sum() >= 0.5 * len(good)
+    assert np.abs(np.median(f.vectors[good], axis=0) - (4.5, -2.25)).max() < 0.08
+
+
+def test_global_shift_is_the_brute_force_best():
+    from visloc.flow.block import _global_shift
+
+    rng = np.random.default_rng(1)
+    for _ in range(50):
+        n = int(rng.integers(40, 400))
+        search = int(rng.integers(1, 80))
+        p = np.round(rng.normal(0, 500, n).cumsum())
+        q = np.roll(p, int(rng.integers(-20, 20))) + np.round(rng.normal(0, 50, n))
+        s = min(search, n // 3)
+        cost = [((q[s + d : n - s + d] - p[s : n - s]) ** 2).sum() for d in range(-s, s + 1)]
+        assert _global_shift(p, q, search) == int(np.argmin(cost)) - s

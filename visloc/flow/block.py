@@ -68,25 +68,34 @@ def _integral(img: NDArray[np.uint8]) -> NDArray:
     return cv2.integral(img, sdepth=cv2.CV_32S if img.size * 255 < 2**31 else cv2.CV_64F)
 
 
-def _band_sums(ii: NDArray, img: NDArray[np.uint8], start: int, step: int, count: int, cols: int) -> NDArray:
-    """Sums (count, cols) over the bands of rows ``[start + j step, start + (j + 1) step)`` of
-    ``img`` (H, W), column by column for its first ``cols`` columns, from its summed-area
-    table ``ii`` (H + 1, W + 1); rows outside the image repeat its edge rows."""
-    n = img.shape[0]
+def _band_sums(ii: NDArray, img: NDArray[np.uint8], start: int, step: int, count: int, length: int,
+               axis: int) -> NDArray:
+    """Sums (count, length) over the bands of rows (``axis=0``) or columns (``axis=1``)
+    ``[start + j step, start + (j + 1) step)`` of ``img`` (H, W), for each of its first
+    ``length`` columns (rows), from its summed-area table ``ii`` (H + 1, W + 1); rows
+    (columns) outside the image repeat its edge rows (columns)."""
+    n = img.shape[axis]
     stop = start + count * step
-    if start >= 0 and stop <= n:
-        cum = ii[start : stop + 1 : step, : cols + 1]
+    if axis == 0:
+        if start >= 0 and stop <= n:
+            cum = ii[start : stop + 1 : step, : length + 1]
+        else:
+            cum = ii[:, : length + 1].take(np.arange(start, stop + 1, step), axis=0, mode="clip")
+        d = cum[1:] - cum[:-1]
+        sums = d[:, 1:] - d[:, :-1]
+        first, last = img[0, :length], img[n - 1, :length]
     else:
-        cum = ii[[min(max(e, 0), n) for e in range(start, stop + 1, step)], : cols + 1]
-    d = cum[1:] - cum[:-1]
-    sums = d[:, 1:] - d[:, :-1]
+        cum = ii[: length + 1].take(np.arange(start, stop + 1, step), axis=1, mode="clip")
+        d = cum[:, 1:] - cum[:, :-1]
+        sums = (d[1:] - d[:-1]).T
+        first, last = img[:length, 0], img[:length, n - 1]
     j = 0
-    while start + j * step < 0 and j < count:  # rows above the image: its first row repeated
-        sums[j] += min(-(start + j * step), step) * img[0, :cols].astype(sums.dtype)
+    while start + j * step < 0 and j < count:  # bands reaching before the image: its first row repeated
+        sums[j] += min(-(start + j * step), step) * first.astype(sums.dtype)
         j += 1
     j = count - 1
-    while start + (j + 1) * step > n and j >= 0:  # rows below it: its last row repeated
-        sums[j] += min(start + (j + 1) * step - n, step) * img[n - 1, :cols].astype(sums.dtype)
+    while start + (j + 1) * step > n and j >= 0:  # bands reaching past it: its last row repeated
+        sums[j] += min(start + (j + 1) * step - n, step) * last.astype(sums.dtype)
         j -= 1
     return sums
 
@@ -98,34 +107,41 @@ def _groups(ii: NDArray, img: NDArray[np.uint8], step: int, rows: int, cols: int
     lower and the columns ``sx`` further right (edge pixels repeated). (Sums, not means: every
     use of them, the matching costs, their ratios and the texture relative to its median, is
     free of scale.)"""
-    return (_band_sums(ii, img, sy, step, rows // step, cols),
-            _band_sums(ii.T, img.T, sx, step, cols // step, rows))
+    return (_band_sums(ii, img, sy, step, rows // step, cols, 0),
+            _band_sums(ii, img, sx, step, cols // step, rows, 1))
 
 
 def _global_profiles(ii: NDArray, y0: int, y1: int, x0: int, x1: int, rows: int, cols: int,
                      gradient: bool) -> tuple[NDArray, NDArray]:
     """Column sums over rows ``y0 .. y1 - 1`` (x profile, ``cols`` long) and row sums over
-    columns ``x0 .. x1 - 1`` (y profile, ``rows`` long) from a summed-area table, as float32,
-    differentiated if asked."""
+    columns ``x0 .. x1 - 1`` (y profile, ``rows`` long) from a summed-area table, as float64
+    (whole numbers), differentiated if asked."""
     out = []
     for cum in (ii[y1, : cols + 1] - ii[y0, : cols + 1], ii[: rows + 1, x1] - ii[: rows + 1, x0]):
         prof = cum[1:] - cum[:-1]
         if gradient:
             prof = prof[1:] - prof[:-1]
-        out.append(prof.astype(np.float32))
+        out.append(prof.astype(np.float64))
     return out[0], out[1]
+
+
+@lru_cache(maxsize=32)
+def _ones(m: int) -> NDArray:
+    ones = np.ones(m)
+    ones.setflags(write=False)
+    return ones
 
 
 def _global_shift(p: NDArray, q: NDArray, search: int) -> int:
     """Integer d in [-S, S] minimising the sum of squared differences of the central part
-    ``p[S : n - S]`` of ``p`` and ``q`` taken ``d`` further along (``S = min(search, n // 3)``):
-    one ``cv2.matchTemplate`` (TM_SQDIFF) over the whole range, every shift compared over the
-    same number of samples."""
+    ``p[S : n - S]`` of ``p`` and ``q`` taken ``d`` further along (``S = min(search, n // 3)``),
+    every shift compared over the same number of samples: ``sum q^2`` over each window
+    minus twice the correlation (``p``'s own energy is the same for every shift); exact for
+    the whole-numbered profiles of :func:`_global_profiles`."""
     n = len(p)
     s = min(search, n // 3)
-    template = np.ascontiguousarray(p[s : n - s], np.float32)[None, :]
-    cost = cv2.matchTemplate(np.ascontiguousarray(q, np.float32)[None, :], template, cv2.TM_SQDIFF)
-    return int(cv2.minMaxLoc(cost)[2][0]) - s
+    cost = np.correlate(q * q, _ones(n - 2 * s), "valid") - 2.0 * np.correlate(q, p[s : n - s], "valid")
+    return int(cost.argmin()) - s
 
 
 def _windows(a: NDArray, length: int) -> NDArray:
@@ -145,47 +161,52 @@ def _profile(g: NDArray, k: int, gradient: bool, out: NDArray) -> None:
         out[...] = bands
 
 
+_NEIGHBOURS = np.array([-1, 0, 1])
 _BIG = np.float32(1e30)  # the cost of a shift outside the frame (finite: no NaN from inf - inf)
 
 
-def _best_shifts(cost: NDArray, p_seg: NDArray, q_seg: NDArray, r: NDArray) -> tuple[NDArray, NDArray, NDArray]:
-    """Per segment: the best integer shift index, its sub-pixel offset, and an ambiguity ratio.
+def _best_shifts(cost: NDArray, i: NDArray, p_seg: NDArray, q3: NDArray, r: NDArray) -> tuple[NDArray, NDArray]:
+    """Sub-pixel offset and ambiguity ratio of every segment's best integer shift.
 
-    ``cost`` (S, D) holds ``_BIG`` where a shift leaves the frame, and in its first and last
-    column (the shifts just beyond the search range, so that the best one always has two
-    neighbours); ``r`` is ``arange(S)``. The offset is one Gauss-Newton step on the squared
-    difference around the best shift, ``s = -sum(g r) / sum(g^2)`` with ``r = q - p`` there
-    and ``g`` the profile's derivative (exact for a pure shift of a linear profile, and
-    exactly 0 for identical frames, where a parabola through the costs is biased). The ratio
-    is the best cost over the best one at least two steps away: 0 for an unambiguous
-    minimum, 1 for none (or one at the end of the search range, or without curvature).
+    ``cost`` (D, S) holds each segment's matching cost per shift, ``_BIG`` where a shift
+    leaves the frame and in the first and last row (the shifts just beyond the search range,
+    so that the best one always has two neighbours); ``i`` (S,) is its argmin over the
+    shifts; ``q3`` (S, 3, L) holds the second frame's segments one step before, at and one
+    step after the best shift; ``r`` is ``arange(S)``. The offset is one Gauss-Newton step on
+    the squared difference around the best shift, ``s = -sum(g r) / sum(g^2)`` with
+    ``r = q - p`` there and ``g`` the profile's derivative (exact for a pure shift of a linear
+    profile, and exactly 0 for identical frames, where a parabola through the costs is
+    biased). The ratio is the best cost over the best one at least two steps away: 0 for an
+    unambiguous minimum, 1 for none (or one at the end of the search range, or without
+    curvature).
     """
-    i = cost.argmin(axis=1)
     im, ip = i - 1, i + 1  # inside the array unless every cost is _BIG (then im = -1: no harm)
-    c0, cm, cp = cost[r, i], cost[r, im], cost[r, ip]
+    c0, cm, cp = cost[i, r], cost[im, r], cost[ip, r]
     rest = cost.copy()  # the best cost at least two steps away
-    rest[r, i] = rest[r, im] = rest[r, ip] = _BIG
-    second = rest.min(axis=1)
-    g = q_seg[r, ip] - q_seg[r, im]  # twice the derivative
-    step = 2.0 * np.vecdot(g, p_seg - q_seg[r, i]) / np.maximum(np.vecdot(g, g), 1e-12)  # 0 where g = 0
+    rest[i, r] = rest[im, r] = rest[ip, r] = _BIG
+    second = rest.min(axis=0)
+    g = q3[:, 2] - q3[:, 0]  # twice the derivative
+    step = 2.0 * np.vecdot(g, p_seg - q3[:, 1]) / np.maximum(np.vecdot(g, g), 1e-12)  # 0 where g = 0
     # a proper inner minimum: neighbours inside the frame and the search range, curved
     good = (np.maximum(cm, cp) < _BIG) & (cm + cp > 2.0 * c0)
     ratio = np.where(good & (second > 0) & (second < _BIG), c0 / np.maximum(second, 1e-30), 1.0)
     off = np.where(good, np.minimum(np.maximum(step, -0.75), 0.75), 0.0)
-    return i, off, ratio
+    return off, ratio
 
 
 class _Layout(NamedTuple):
     nby: int
     nbx: int
-    length: int
+    length: int  # profile row length: max(rows, cols), a whole number of steps
     band: NDArray  # (S,) row of the stacked profile array of each segment
+    chunk: NDArray  # (S,) its first step-long chunk of that row (start // step)
     start: NDArray  # (S,) first profile sample of each segment
     limit: NDArray  # (S,) last valid start in the second frame
     is_x: NDArray  # (S,) x segments first, then y segments
     d: NDArray  # (D,) search offsets, one beyond the range at each end
     centers: NDArray  # (N, 2) block centres
     index: NDArray  # (S,) 0 .. S - 1, the segments' own indices
+    weights: NDArray  # (step,) 1, but 0 for a chunk's last sample when a segment ends there
 
 
 @lru_cache(maxsize=16)
@@ -202,31 +223,51 @@ def _layout(rows: int, cols: int, bsz: int, stp: int, srch: int, lx: int, ly: in
     is_x = np.arange(2 * n) < n
     centers = (np.stack([xs[cc.ravel()], ys[rr.ravel()]], axis=1) + (bsz - 1) / 2.0).astype(np.float64)
     index = np.arange(2 * n)
-    for arr in (band, start, limit, is_x, centers, index):
+    weights = np.ones(stp, np.float32)
+    weights[seg_len % stp :] = 0.0 if seg_len % stp else 1.0
+    chunk = start // stp
+    for arr in (band, chunk, start, limit, is_x, centers, index, weights):
         arr.setflags(write=False)
-    return _Layout(nby, nbx, max(lx, ly), band, start, limit, is_x, np.arange(-srch - 1, srch + 2), centers, index)
+    return _Layout(nby, nbx, max(rows, cols), band, chunk, start, limit, is_x, np.arange(-srch - 1, srch + 2),
+                   centers, index, weights)
 
 
 class _Search(NamedTuple):
-    moved: NDArray  # (S, D) the displacement each shift stands for: global shift + offset
-    pos: NDArray  # (S, D) where each segment is compared in the second frame (clamped)
-    ok: NDArray  # (S, D) False where that position leaves the profile
+    moved: NDArray  # (D, S) the displacement each shift stands for: global shift + offset
+    ok: NDArray  # (D, S) False where that shift takes the segment off the profile
 
 
 @lru_cache(maxsize=512)
 def _search(key: tuple[int, ...], sx: int, sy: int) -> _Search:
-    """Second-frame positions of every segment of the layout ``_layout(*key)`` for the global
-    shift (sx, sy) (cached: shifts repeat from frame to frame)."""
+    """Which shifts of every segment of the layout ``_layout(*key)`` stay on the second
+    frame's profile for the global shift (sx, sy) (cached: shifts repeat from frame to frame)."""
     lay = _layout(*key)
     shift = np.where(lay.is_x, sx, sy)
     pos = (lay.start + shift)[:, None] + lay.d[None, :]
     ok = (pos >= 0) & (pos <= lay.limit[:, None])
     ok[:, [0, -1]] = False  # the shifts just beyond the search range: see _best_shifts
-    pos = np.minimum(np.maximum(pos, 0), lay.limit[:, None])
     moved = (shift[:, None] + lay.d[None, :]).astype(np.float64)
-    for arr in (moved, pos, ok):
+    moved, ok = moved.T.copy(), ok.T.copy()
+    for arr in (moved, ok):
         arr.setflags(write=False)
-    return _Search(moved, pos, ok)
+    return _Search(moved, ok)
+
+
+def _segment_sums(e: NDArray, lay: _Layout, k: int, seg_len: int) -> NDArray:
+    """Sums (rows, D, segments) over every block's segment of ``e`` (rows, D, length): segment
+    j covers samples ``[j step, j step + seg_len)`` (``k`` chunks of ``step`` samples, the
+    last one short when ``seg_len`` is not a whole number of chunks)."""
+    stp = len(lay.weights)
+    chunks = e.reshape(-1, stp)
+    if k == 1:
+        return (chunks @ lay.weights).reshape(e.shape[0], e.shape[1], -1)
+    full = chunks.sum(axis=1).reshape(e.shape[0], e.shape[1], -1)
+    nseg = full.shape[2] - k + 1
+    out = full[..., :nseg].copy()
+    for m in range(1, k - 1):
+        out += full[..., m : m + nseg]
+    out += (chunks @ lay.weights).reshape(full.shape)[..., k - 1 :]
+    return out
 
 
 def block_flow(
@@ -298,22 +339,38 @@ def block_flow(
     lx, ly = cols - grad, rows - grad  # profile lengths
     key = (rows, cols, bsz, stp, srch, lx, ly, seg_len)
     lay = _layout(*key)
-    nby, nbx = lay.nby, lay.nbx
-    P = np.zeros((2, nby + nbx, lay.length), np.float32)  # first frame, second frame
-    for i, (gx, gy) in enumerate(((gxa, gya), (gxb, gyb))):
-        _profile(gx, k, grad, P[i, :nby, :lx])  # (nby, Lx)
-        _profile(gy, k, grad, P[i, nby:, :ly])  # (nbx, Ly)
-    P, Q = P
-    moved, pos, ok = _search(key, sx, sy)  # where each segment may be in the second frame
+    nby, nb = lay.nby, lay.nby + lay.nbx
+    # the first frame's profiles P (one row per band: x profiles of the row bands, then y
+    # profiles of the column bands) and the second frame's, Q, placed in a wider array so that
+    # one window offset per search step serves both directions: Q[b, pad + x + d] is the second
+    # frame's sample x + d along the profile further than the global shift of its direction
+    pad = srch + 1 + max(abs(sx), abs(sy))
+    dtype = np.float32 if grad else np.float64  # (intensity costs subtract large sums)
+    P = np.zeros((nb, lay.length), dtype)
+    Q = np.zeros((nb, lay.length + 2 * pad), dtype)
+    _profile(gxa, k, grad, P[:nby, :lx])
+    _profile(gya, k, grad, P[nby:, :ly])
+    _profile(gxb, k, grad, Q[:nby, pad - sx : pad - sx + lx])
+    _profile(gyb, k, grad, Q[nby:, pad - sy : pad - sy + ly])
+    moved, ok = _search(key, sx, sy)  # which shifts keep each segment on the profile
+    d0 = pad + int(lay.d[0])
+    e = _windows(Q, lay.length)[:, d0 : d0 + len(lay.d)] - P[:, None, :]  # (nb, D, length)
+    if grad:
+        np.multiply(e, e, out=e)
+        sums = _segment_sums(e, lay, k, seg_len)  # sums of squared differences
+    else:  # with each window's mean removed: sum (e - mean e)^2 = sum e^2 - (sum e)^2 / L
+        s1 = _segment_sums(e, lay, k, seg_len)
+        np.multiply(e, e, out=e)
+        sums = _segment_sums(e, lay, k, seg_len) - s1 * s1 / seg_len
+    cost = np.where(ok, sums.transpose(1, 0, 2)[:, lay.band, lay.chunk], _BIG)  # (D, S)
+    best = cost.argmin(axis=0)
     p_seg = _windows(P, seg_len)[lay.band, lay.start]  # (S, L)
-    q_seg = _windows(Q, seg_len)[lay.band[:, None], pos]  # (S, D, L)
+    q3 = _windows(Q, seg_len)[lay.band[:, None], (lay.start + best + d0)[:, None] + _NEIGHBOURS]  # (S, 3, L)
     if not grad:
         p_seg = p_seg - p_seg.mean(axis=1, keepdims=True)
-        q_seg = q_seg - q_seg.mean(axis=2, keepdims=True)
-    diff = q_seg - p_seg[:, None, :]
-    cost = np.where(ok, np.vecdot(diff, diff), _BIG)
-    best, off, ratio = _best_shifts(cost, p_seg, q_seg, lay.index)
-    disp = moved[lay.index, best] + off  # (S,): x segments, then y segments
+        q3 = q3 - q3.mean(axis=2, keepdims=True)
+    off, ratio = _best_shifts(cost, best, p_seg, q3, lay.index)
+    disp = moved[best, lay.index] + off  # (S,): x segments, then y segments
     texture = np.vecdot(p_seg, p_seg).reshape(2, -1).min(axis=0)
     ratio = ratio.reshape(2, -1).max(axis=0)
     half = texture.size // 2

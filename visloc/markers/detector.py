@@ -33,6 +33,8 @@ from visloc.markers.dictionary import Dictionary, load_dictionary
 from visloc.markers.refine import refine_quads
 from visloc.types import MarkerDetection
 
+_FOUR = np.arange(4)
+
 __all__ = ["FAST_PASSES", "CandidateTrace", "DetectionTrace", "DetectorParams", "MarkerDetector", "PassTrace", "SearchPass"]
 
 
@@ -276,17 +278,19 @@ class MarkerDetector:
             valid, bits = read_bits(sample_cells(gray, approx[fresh], n_cells), 0.5)[:2]
             white = bits.reshape(len(bits), -1).sum(axis=1)
             looks = valid & (white >= lo_white) & (white <= hi_white)
-            for i in fresh[~looks]:
-                _note(log, contours[i], float(scale[0]), None, None, None, None, None, "bits")
+            if log is not None:
+                for i in fresh[~looks]:
+                    _note(log, contours[i], float(scale[0]), None, None, None, None, None, "bits")
             keep = fresh[looks]
             hints = (approx[keep] + 0.5) / scale - 0.5
             quads, fitted, splits = fit_quads([contours[i] for i in keep], hints, sigma=p.corner_sigma,
                                               padding=p.corner_padding, splits=log is not None)  # 6-7
-            for j, i in enumerate(keep):
-                if not fitted[j]:
+            full = (quads + 0.5) * scale - 0.5  # to full-resolution pixel centres
+            for j, (i, ok) in enumerate(zip(keep.tolist(), fitted.tolist(), strict=True)):
+                if not ok:
                     _note(log, contours[i], float(scale[0]), None, None, None, None, None, "corners")
                     continue
-                cands.quads.append((quads[j] + 0.5) * scale - 0.5)  # to full-resolution pixel centres
+                cands.quads.append(full[j])
                 cands.contours.append(contours[i])
                 cands.scales.append(float(scale[0]))
                 cands.splits.append(splits[j] if splits is not None else None)
@@ -304,19 +308,23 @@ class MarkerDetector:
         cells = sample_cells(gray, corners, n_cells)  # stage 9, batched
         valid, bits, margin, contrast = read_bits(cells, p.border_error_rate)
         ids, shift, hamming, matched = decode(bits, self.dictionary, p.error_correction_rate)  # 10
+        accept = valid & matched
+        # each accepted quad from the marker's own top-left corner, and its area (all at once)
+        order = (_FOUR[None, :] + shift[:, None]) % 4
+        rolled = corners[np.arange(len(corners))[:, None], order]
+        areas = np.abs(_areas(rolled)).tolist()
         found: list[tuple[MarkerDetection, float]] = []
-        for i in range(len(quads)):
+        rows = zip(ids.tolist(), hamming.tolist(), margin.tolist(), shift.tolist(), contrast.tolist(),
+                   refined.tolist(), strict=True)
+        for i, (mid, ham, mar, rot, con, ref) in enumerate(rows):
             cell_i = CellSample(cells.cells[i : i + 1], cells.ring[i : i + 1]) if log is not None else None
-            if not (valid[i] and matched[i]):
-                stage, b = ("bits", None) if not valid[i] else ("dictionary", bits[i])
-                _note(log, cands.contours[i], cands.scales[i], cands.splits[i], quads[i], cell_i, b, None, stage)
+            if not accept[i]:
+                if log is not None:
+                    stage, b = ("bits", None) if not valid[i] else ("dictionary", bits[i])
+                    _note(log, cands.contours[i], cands.scales[i], cands.splits[i], quads[i], cell_i, b, None, stage)
                 continue
-            c = np.roll(corners[i], -int(shift[i]), axis=0)
-            det = MarkerDetection(
-                int(ids[i]), c, int(hamming[i]), float(margin[i]), int(shift[i]), float(contrast[i]),
-                bool(refined[i]),
-            )
-            found.append((det, abs(float(_areas(c)))))
+            det = MarkerDetection(int(mid), rolled[i], int(ham), float(mar), int(rot), float(con), bool(ref))
+            found.append((det, areas[i]))
             _note(log, cands.contours[i], cands.scales[i], cands.splits[i], quads[i], cell_i, bits[i], det, "accepted")
         dets = _merge_duplicates(found)
         if log is not None and len(dets) < len(found):

@@ -127,6 +127,7 @@ def _global_profiles(ii: NDArray, y0: int, y1: int, x0: int, x1: int, rows: int,
 
 @lru_cache(maxsize=32)
 def _ones(m: int) -> NDArray:
+    """A read-only float64 row of ``m`` ones (cached)."""
     ones = np.ones(m)
     ones.setflags(write=False)
     return ones
@@ -224,7 +225,8 @@ def _layout(rows: int, cols: int, bsz: int, stp: int, srch: int, lx: int, ly: in
     centers = (np.stack([xs[cc.ravel()], ys[rr.ravel()]], axis=1) + (bsz - 1) / 2.0).astype(np.float64)
     index = np.arange(2 * n)
     weights = np.ones(stp, np.float32)
-    weights[seg_len % stp :] = 0.0 if seg_len % stp else 1.0
+    if seg_len % stp:  # a segment ends inside its last chunk (gradient profiles: one sample short)
+        weights[seg_len % stp :] = 0.0
     chunk = start // stp
     for arr in (band, chunk, start, limit, is_x, centers, index, weights):
         arr.setflags(write=False)

@@ -114,3 +114,30 @@ def test_global_shift_is_the_brute_force_best():
         s = min(search, n // 3)
         cost = [((q[s + d : n - s + d] - p[s : n - s]) ** 2).sum() for d in range(-s, s + 1)]
         assert _global_shift(p, q, search) == int(np.argmin(cost)) - s
+
+
+@pytest.mark.parametrize("block, step", [(40, 40), (40, 20), (40, 10), (40, 1), (9, 3), (12, 1)])
+@pytest.mark.parametrize("seg_len_short", [0, 1])
+def test_segment_sums_match_a_direct_sum(block, step, seg_len_short):
+    # every segment [j step, j step + seg_len) summed: whole chunks plus a partial one
+    from visloc.flow.block import _layout, _segment_sums
+
+    rows, cols = 3 * block, 4 * block
+    seg_len = block - seg_len_short  # gradient profiles are one sample shorter than the block
+    lay = _layout(rows, cols, block, step, 2, cols - seg_len_short, rows - seg_len_short, seg_len)
+    rng = np.random.default_rng(block * 100 + step)
+    e = rng.normal(size=(5, 7, lay.length))
+    got = _segment_sums(e, lay, block // step, seg_len)
+    nseg = (lay.length - block) // step + 1
+    want = np.stack([e[..., j * step : j * step + seg_len].sum(axis=-1) for j in range(nseg)], axis=-1)
+    assert got.shape == want.shape
+    assert np.allclose(got, want, rtol=1e-5, atol=1e-4)
+
+
+def test_one_pixel_step_measures_the_shift():
+    a, b = moved(2.5, -1.25)
+    a, b = a[60:140, 80:200].copy(), b[60:140, 80:200].copy()
+    f = block_flow(a, b, block=24, step=1)
+    good = f.confidence > 0.2
+    assert good.sum() >= 0.5 * len(good)
+    assert np.abs(np.median(f.vectors[good], axis=0) - (2.5, -1.25)).max() < 0.08

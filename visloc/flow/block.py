@@ -207,7 +207,8 @@ class _Layout(NamedTuple):
     d: NDArray  # (D,) search offsets, one beyond the range at each end
     centers: NDArray  # (N, 2) block centres
     index: NDArray  # (S,) 0 .. S - 1, the segments' own indices
-    weights: NDArray  # (step,) 1, but 0 for a chunk's last sample when a segment ends there
+    whole: NDArray  # (step,) ones: the sum over a chunk
+    partial: NDArray  # (step,) ones for the samples of a segment's last, partial chunk
 
 
 @lru_cache(maxsize=16)
@@ -224,14 +225,13 @@ def _layout(rows: int, cols: int, bsz: int, stp: int, srch: int, lx: int, ly: in
     is_x = np.arange(2 * n) < n
     centers = (np.stack([xs[cc.ravel()], ys[rr.ravel()]], axis=1) + (bsz - 1) / 2.0).astype(np.float64)
     index = np.arange(2 * n)
-    weights = np.ones(stp, np.float32)
-    if seg_len % stp:  # a segment ends inside its last chunk (gradient profiles: one sample short)
-        weights[seg_len % stp :] = 0.0
+    whole = np.ones(stp, np.float32)
+    partial = (np.arange(stp) < seg_len % stp).astype(np.float32)
     chunk = start // stp
-    for arr in (band, chunk, start, limit, is_x, centers, index, weights):
+    for arr in (band, chunk, start, limit, is_x, centers, index, whole, partial):
         arr.setflags(write=False)
     return _Layout(nby, nbx, max(rows, cols), band, chunk, start, limit, is_x, np.arange(-srch - 1, srch + 2),
-                   centers, index, weights)
+                   centers, index, whole, partial)
 
 
 class _Search(NamedTuple):
@@ -257,18 +257,22 @@ def _search(key: tuple[int, ...], sx: int, sy: int) -> _Search:
 
 def _segment_sums(e: NDArray, lay: _Layout, k: int, seg_len: int) -> NDArray:
     """Sums (rows, D, segments) over every block's segment of ``e`` (rows, D, length): segment
-    j covers samples ``[j step, j step + seg_len)`` (``k`` chunks of ``step`` samples, the
-    last one short when ``seg_len`` is not a whole number of chunks)."""
-    stp = len(lay.weights)
+    j covers samples ``[j step, j step + seg_len)``, i.e. ``seg_len // step`` whole chunks of
+    ``step`` samples and the first ``seg_len % step`` samples of the next one (``k`` =
+    block / step chunks per block)."""
+    stp = len(lay.partial)
+    whole, part = divmod(seg_len, stp)
     chunks = e.reshape(-1, stp)
-    if k == 1:
-        return (chunks @ lay.weights).reshape(e.shape[0], e.shape[1], -1)
-    full = chunks.sum(axis=1).reshape(e.shape[0], e.shape[1], -1)
-    nseg = full.shape[2] - k + 1
+    shape = (e.shape[0], e.shape[1], -1)
+    nseg = e.shape[2] // stp - k + 1
+    if whole == 0:  # the default: blocks side by side, gradient segments one sample short
+        return (chunks @ lay.partial).reshape(shape)[..., :nseg]
+    full = (chunks @ lay.whole).reshape(shape)
     out = full[..., :nseg].copy()
-    for m in range(1, k - 1):
+    for m in range(1, whole):
         out += full[..., m : m + nseg]
-    out += (chunks @ lay.weights).reshape(full.shape)[..., k - 1 :]
+    if part:
+        out += (chunks @ lay.partial).reshape(shape)[..., whole : whole + nseg]
     return out
 
 

@@ -26,6 +26,21 @@ def test_find_contours_keeps_a_component_inside_a_hole():
     assert len(find_contours(b)) == 2
 
 
+def test_find_contours_enclosing_keeps_only_regions_with_a_hole():
+    b = _ink()
+    b[10:40, 10:40] = 255  # a ring with a hole: kept
+    b[15:35, 15:35] = 0
+    b[60:90, 10:40] = 255  # a solid square: no hole
+    b[60:90, 60:90] = 255  # a ring whose "hole" opens to the outside: no hole
+    b[65:85, 65:95] = 0
+    b[45:47, 100:102] = 255  # a speck
+    assert len(find_contours(b)) == 4
+    cs = find_contours(b, enclosing=True)
+    assert len(cs) == 1
+    c = cs[0].reshape(-1, 2)
+    assert (c.min(axis=0) == [10, 10]).all() and (c.max(axis=0) == [39, 39]).all()
+
+
 def test_filter_keeps_squares_and_rejects_other_shapes():
     b = _ink((200, 300))
     cv2.fillPoly(b, [np.array([[30, 30], [80, 35], [75, 85], [28, 80]])], 255)  # quad

@@ -3,7 +3,8 @@
 One frame's path:
 
 1. grey; then, per search pass (an image scale and a threshold window):
-   2. Gaussian blur, 3. adaptive threshold, 4. outer contours, 5. candidate filter,
+   2. Gaussian blur, 3. adaptive threshold, 4. outer contours of ink regions that enclose
+   a hole, 5. candidate filter,
    6. radial-peak corner split, 7. line fits -> candidate quads in full-resolution pixels;
 8. sub-pixel edge refinement of all candidates on the full-resolution grey image (batched;
    candidates whose cells show no black border or no contrast are dropped first, cheaply);
@@ -229,7 +230,8 @@ class MarkerDetector:
         p = self.params
         blurred = blur(work, p.blur_sigma)  # stage 2
         binary = threshold(blurred, window=window, offset=p.offset)  # stage 3
-        contours = find_contours(binary)  # stage 4
+        # stage 4; a marker's frame encloses its white cells, so ink without a hole is no marker
+        contours = find_contours(binary, enclosing=True)
         if log is not None:
             log["passes"].append(PassTrace(float(scale[0]), window, blurred, binary, contours))
         return filter_candidates(contours, work.shape, replace(p.candidates, min_side=min_side))  # 5

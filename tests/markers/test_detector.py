@@ -146,6 +146,29 @@ def test_trace_and_explain_pictures(tmp_path, detector):
     assert all(p.stat().st_size > 0 for p in paths)
 
 
+def test_each_marker_is_proposed_once_across_the_passes(detector):
+    scene = random_scene(3, size=(320, 240), difficulty="easy")
+    trace = detector.trace(scene.image)
+    # the coarse pass sees the same markers again, but skips them before its filter
+    assert len(trace.passes) == 2 and len(trace.passes[1].contours) > 0
+    accepted = [c for c in trace.candidates if c.stage == "accepted"]
+    assert len(accepted) == len(trace.detections) > 0
+    assert {c.scale for c in accepted} == {1.0}
+
+
+def test_same_box_matches_boxes_by_centre_and_size():
+    from visloc.markers.detector import _same_box
+
+    seen = np.array([[[10.0, 10.0], [29.0, 29.0]]])  # a 20 px box centred at (19.5, 19.5)
+    boxes = np.array([
+        [[11.0, 9.0], [30.0, 28.0]],  # shifted by a pixel: the same
+        [[14.0, 14.0], [25.0, 25.0]],  # same centre, 12 px: a different (inner) square
+        [[20.0, 20.0], [39.0, 39.0]],  # shifted by half its size
+    ])
+    assert _same_box(boxes, seen).tolist() == [True, False, False]
+    assert _same_box(boxes, seen[:0]).tolist() == [False, False, False]
+
+
 def test_bgr_input_gives_the_same_result(detector):
     scene = random_scene(2, size=(320, 240), difficulty="easy")
     bgr = np.repeat(scene.image[:, :, None], 3, axis=2)

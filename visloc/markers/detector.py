@@ -225,8 +225,10 @@ class MarkerDetector:
         return work, np.array([gray.shape[1] / work.shape[1], gray.shape[0] / work.shape[0]])
 
     def _stages_2_to_5(self, work: NDArray[np.uint8], window: int, min_side: float, log: dict | None,
-                       scale: NDArray) -> list[tuple[NDArray, NDArray]]:
-        """Blur, threshold, contours and candidate filter on the pass image ``work``."""
+                       scale: NDArray, seen: NDArray) -> list[tuple[NDArray, NDArray]]:
+        """Blur, threshold, contours and candidate filter on the pass image ``work``; contours
+        whose bounding box matches one of the ``seen`` quads (full-resolution pixels, proposed
+        by an earlier pass) skip the filter."""
         p = self.params
         blurred = blur(work, p.blur_sigma)  # stage 2
         binary = threshold(blurred, window=window, offset=p.offset)  # stage 3
@@ -234,24 +236,13 @@ class MarkerDetector:
         contours = find_contours(binary, enclosing=True)
         if log is not None:
             log["passes"].append(PassTrace(float(scale[0]), window, blurred, binary, contours))
+        if len(seen) and contours:
+            box = np.array([cv2.boundingRect(c) for c in contours], np.float64).reshape(-1, 2, 2)
+            lo = (box[:, 0] + 0.5) * scale - 0.5  # first and last pixel centres, full resolution
+            hi = (box[:, 0] + box[:, 1] - 0.5) * scale - 0.5
+            new = ~_same_box(np.stack([lo, hi], axis=1), np.stack([seen.min(axis=1), seen.max(axis=1)], axis=1))
+            contours = [contours[i] for i in np.flatnonzero(new)]
         return filter_candidates(contours, work.shape, replace(p.candidates, min_side=min_side))  # 5
-
-    def _propose(self, gray: NDArray[np.uint8], base: float, log: dict | None):
-        """Stages 2-5 of every pass. Returns per pass: candidate contours (in the pass's image),
-        the scale to full resolution, and their polygon corners (K, 4, 2) in full-resolution
-        pixels."""
-        p = self.params
-        n_cells = self.dictionary.marker_size + 2
-        out = []
-        for sp in p.passes:
-            work, scale = self._work_image(gray, sp.scale * base)
-            window = sp.window if sp.window is not None else default_window(work.shape)
-            # a marker needs at least about 1 px per cell to be decoded: smaller ones are not looked at
-            min_side = max(p.candidates.min_side, n_cells / scale.max())
-            found = self._stages_2_to_5(work, window, min_side, log, scale)
-            approx = _clockwise(np.array([q for _, q in found], np.float64).reshape(-1, 4, 2))
-            out.append(([c for c, _ in found], scale, (approx + 0.5) * scale - 0.5))
-        return out
 
     def _run(self, image: NDArray[np.uint8], log: dict | None) -> list[MarkerDetection]:
         p = self.params
@@ -265,9 +256,17 @@ class MarkerDetector:
         lo_white, hi_white = lo_white - slack, hi_white + slack
         cands = _Cands()
         seen = np.zeros((0, 4, 2))
-        for contours, scale, approx in self._propose(gray, base, log):
-            if not contours:
+        for sp in p.passes:
+            work, scale = self._work_image(gray, sp.scale * base)
+            window = sp.window if sp.window is not None else default_window(work.shape)
+            # a marker needs at least about 1 px per cell to be decoded: smaller ones are not looked at
+            min_side = max(p.candidates.min_side, n_cells / scale.max())
+            found = self._stages_2_to_5(work, window, min_side, log, scale, seen)  # stages 2-5
+            if not found:
                 continue
+            contours = [c for c, _ in found]
+            approx = _clockwise(np.array([q for _, q in found], np.float64).reshape(-1, 4, 2))
+            approx = (approx + 0.5) * scale - 0.5  # polygon corners in full-resolution pixels
             # a candidate that an earlier pass already proposed and fitted costs nothing more
             fresh = _distinct(np.concatenate([seen, approx]))
             fresh = fresh[fresh >= len(seen)] - len(seen)
@@ -300,7 +299,6 @@ class MarkerDetector:
         if not cands.quads:
             return []
         quads = np.array(cands.quads)
-        n_cells = self.dictionary.marker_size + 2
         corners, refined = quads, np.zeros(len(quads), bool)
         if p.refine:  # stage 8, batched
             side = np.sqrt(np.abs(_areas(quads)))
@@ -363,6 +361,19 @@ def _areas(q: NDArray) -> NDArray:
     """Signed areas of quads (..., 4, 2); positive for clockwise quads in y-down images."""
     x, y = q[..., 0], q[..., 1]
     return 0.5 * ((x * y[..., _NEXT]).sum(-1) - (x[..., _NEXT] * y).sum(-1))
+
+
+def _same_box(boxes: NDArray, seen: NDArray) -> NDArray[np.bool_]:
+    """Which of the boxes (K, 2, 2: first and last pixel centre) match one of the ``seen``
+    boxes (S, 2, 2) by :func:`_distinct`'s rule: centre within 15 % of the seen box's size
+    (geometric mean of its width and height), size within 0.8-1.25 times."""
+    if not len(seen) or not len(boxes):
+        return np.zeros(len(boxes), bool)
+    size = np.sqrt(np.prod(boxes[:, 1] - boxes[:, 0] + 1, axis=1))
+    seen_size = np.sqrt(np.prod(seen[:, 1] - seen[:, 0] + 1, axis=1))
+    d2 = ((boxes.mean(axis=1)[:, None] - seen.mean(axis=1)[None]) ** 2).sum(axis=2)
+    ratio = size[:, None] / np.maximum(seen_size[None, :], 1e-9)
+    return ((d2 < (0.15 * seen_size[None, :]) ** 2) & (ratio > 0.8) & (ratio < 1.25)).any(axis=1)
 
 
 def _distinct(quads: NDArray) -> NDArray[np.intp]:

@@ -27,11 +27,18 @@ __all__ = ["edge_offsets", "refine_quads", "sample_edge_profiles"]
 
 
 @lru_cache(maxsize=32)
-def _positions(count: int, end_gap: float) -> NDArray[np.float64]:
-    """Fractions along a side where its ``count`` profiles are taken (read-only, cached)."""
+def _profile_grid(count: int, end_gap: float, radius: int) -> tuple[NDArray[np.float32], NDArray[np.float64]]:
+    """Coefficients of the profile samples (read-only, cached): ``(3, count * S)`` rows 1, t,
+    s for the sample at fraction t along a side and offset s along its normal (S = 2 radius
+    + 1), and ``(2, count)`` rows 1, t for the profile centres."""
     t = np.linspace(end_gap, 1 - end_gap, count)
-    t.setflags(write=False)
-    return t
+    s = np.arange(-radius, radius + 1, dtype=np.float64)
+    samples = np.stack([np.ones((count, len(s))), np.repeat(t[:, None], len(s), axis=1),
+                        np.repeat(s[None, :], count, axis=0)]).reshape(3, -1).astype(np.float32)
+    centres = np.stack([np.ones(count), t])
+    samples.setflags(write=False)
+    centres.setflags(write=False)
+    return samples, centres
 
 
 def sample_edge_profiles(
@@ -61,18 +68,18 @@ def sample_edge_profiles(
         Bilinearly interpolated grey levels, inside (dark) first.
     """
     q = np.asarray(quads, np.float64).reshape(-1, 4, 2)
+    k = len(q)
     d = q[:, _NEXT] - q
     u = d / np.maximum(np.hypot(d[..., 0], d[..., 1]), 1e-9)[..., None]
     normals = np.stack([u[..., 1], -u[..., 0]], axis=-1)  # clockwise quad, y down: outward
-    t = _positions(count, end_gap)
-    base = q[:, :, None, :] + t[None, None, :, None] * d[:, :, None, :]
-    s = np.arange(-radius, radius + 1, dtype=np.float32)
-    k = len(q)
-    b32 = base.astype(np.float32)
-    n32 = normals.astype(np.float32)
-    mx = (b32[..., 0, None] + s * n32[:, :, None, 0, None]).reshape(k * 4 * count, -1)
-    my = (b32[..., 1, None] + s * n32[:, :, None, 1, None]).reshape(k * 4 * count, -1)
-    prof = cv2.remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    samples, centres = _profile_grid(count, end_gap, radius)
+    # every sample is corner + t * side + s * normal: one product per side gives all of them
+    frame = np.stack([q, d, normals], axis=-1).reshape(k * 4, 2, 3)
+    xy = frame.astype(np.float32) @ samples  # (K * 4, 2, count * S)
+    width = 2 * radius + 1
+    prof = cv2.remap(gray, xy[:, 0].reshape(-1, width), xy[:, 1].reshape(-1, width), cv2.INTER_LINEAR,
+                     borderMode=cv2.BORDER_REPLICATE)
+    base = np.swapaxes(frame[:, :, :2] @ centres, 1, 2).reshape(k, 4, count, 2)
     return base, normals, prof.astype(np.float32).reshape(k, 4, count, -1)
 
 

@@ -48,6 +48,26 @@ def test_detect_folder_with_poses_annotations_and_rerun(rendered, tmp_path, caps
     assert "4 frames" in capsys.readouterr().err
 
 
+def test_fast_search_finds_the_rendered_markers(tmp_path):
+    from visloc.cli import build_parser
+    from visloc.commands._common import detector_for
+    from visloc.markers import FAST_PASSES
+
+    assert detector_for(build_parser().parse_args(["detect", "x", "--fast"])).params.passes == FAST_PASSES
+    assert detector_for(build_parser().parse_args(["detect", "x"])).params.passes != FAST_PASSES
+    for argv in (["localize", "x", "--camera", "c", "--map", "m"], ["track", "x", "--camera", "c", "--body", "b",
+                                                                     "--reference", "r"]):
+        assert build_parser().parse_args([*argv, "--fast"]).fast
+    src = tmp_path / "frames"
+    assert main(["render", "markers", str(src), "--n", "3", "--seed", "5", "--size", "640x480"]) == 0
+    out = tmp_path / "fast.jsonl"
+    assert main(["detect", str(src), "--fast", "--out", str(out), "--quiet"]) == 0
+    gt = json.loads((src / "ground_truth.json").read_text())
+    for rec, frame in zip(_lines(out), gt["frames"], strict=True):
+        want = sorted(m["id"] for m in frame["markers"] if m["visible"])
+        assert sorted(m["id"] for m in rec["markers"]) == want
+
+
 def test_corrupt_image_is_reported_and_the_run_goes_on(rendered, tmp_path, capsys):
     folder = tmp_path / "frames"
     folder.mkdir()

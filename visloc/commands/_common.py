@@ -8,12 +8,21 @@ import sys
 import numpy as np
 from tqdm import tqdm
 
+from visloc.markers import FAST_PASSES, MarkerDetector
 from visloc.pose import Camera
 from visloc.types import MarkerDetection, Pose
 
 
 def warn(command: str, text: str) -> None:
     tqdm.write(f"visloc {command}: warning: {text}", file=sys.stderr)
+
+
+def detector_for(args: argparse.Namespace) -> MarkerDetector:
+    """The marker detector of ``--dict``; with ``--fast`` it searches shrunk images
+    (:data:`visloc.markers.FAST_PASSES`)."""
+    if getattr(args, "fast", False):
+        return MarkerDetector(args.dict, passes=FAST_PASSES)
+    return MarkerDetector(args.dict)
 
 def frames_of(source, args: argparse.Namespace):
     """The frames of an open source with a progress bar (unless ``--quiet``), stopping after

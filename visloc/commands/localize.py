@@ -10,9 +10,15 @@ from pathlib import Path
 import numpy as np
 
 from visloc.cli import UsageError
-from visloc.commands._common import camera_for, frames_of, open_timed_source, read_columns, warn
+from visloc.commands._common import (
+    camera_for,
+    detector_for,
+    frames_of,
+    open_timed_source,
+    read_columns,
+    warn,
+)
 from visloc.io import JsonlWriter, RerunLogger
-from visloc.markers import MarkerDetector
 from visloc.pose import Camera
 
 LOCALIZE_GRID = {"rows": 10, "cols": 10, "marker_length": 0.10, "spacing": 0.05}
@@ -64,7 +70,7 @@ def localize(args: argparse.Namespace) -> int:
     from visloc.pose.map_pose import estimate_camera_pose
     from visloc.pose.maps import MarkerMap
 
-    detector = MarkerDetector(args.dict)
+    detector = detector_for(args)
     camera = Camera.from_file(args.camera)
     mmap = MarkerMap.from_file(args.map)
     truth = read_columns(args.truth, "--truth", ("t", "x", "y", "z")) if args.truth else None
@@ -136,7 +142,7 @@ def track(args: argparse.Namespace) -> int:
     from visloc.pose.maps import MarkerMap
     from visloc.pose.relative import track_body
 
-    detector = MarkerDetector(args.dict)
+    detector = detector_for(args)
     camera = Camera.from_file(args.camera)
     body = MarkerMap.from_file(args.body)
     reference = MarkerMap.from_file(args.reference)

@@ -12,17 +12,16 @@ import numpy as np
 from tqdm import tqdm
 
 from visloc.cli import UsageError
-from visloc.commands._common import camera_for, frames_of, marker_records, warn
+from visloc.commands._common import camera_for, detector_for, frames_of, marker_records, warn
 from visloc.commands.flow import render_flow
 from visloc.commands.localize import render_localize
 from visloc.io import AnnotationSink, JsonlWriter, RerunLogger, draw_markers, open_source
-from visloc.markers import MarkerDetector
 from visloc.pose import Camera, estimate_marker_pose
 
 
 def detect(args: argparse.Namespace) -> int:
     """``visloc detect``: markers (and poses) of every frame of a source."""
-    detector = MarkerDetector(args.dict)
+    detector = detector_for(args)
     camera = Camera.from_file(args.camera) if args.camera else None
     if (camera is None) != (args.marker_length is None):
         raise UsageError("poses need both --camera FILE and --marker-length M")

@@ -188,6 +188,52 @@ def run_rendered(size, methods, rounds, dict_name, sets, seed0):
     return stats
 
 
+#: the detector's stage functions whose time :func:`stage_times` measures, in pipeline order
+STAGES = {"blur": "2 blur", "threshold": "3 threshold", "find_contours": "4 contours",
+          "filter_candidates": "5 filter", "fit_quads": "6-7 corner split + line fits",
+          "refine_quads": "8 edge refinement", "sample_cells": "9 cell sampling (both looks)",
+          "read_bits": "9 bits", "decode": "10 dictionary"}
+
+
+def stage_times(size, sets, seed0, rounds=2):
+    """Where visloc's time goes: ms per frame in each stage function of the detector (wrapped
+    with a timer for this run only) over the same rendered frames as :func:`run_rendered`."""
+    import visloc.markers.detector as det_mod
+
+    images = [random_scene(np.random.default_rng([seed0, size[0], list(SETS).index(name), i]), size=size,
+                           dictionary="DICT_4X4_50", difficulty=name).image
+              for name, n in sets.items() for i in range(n)]
+    spent = dict.fromkeys(STAGES, 0.0)
+    originals = {name: getattr(det_mod, name) for name in STAGES}
+
+    def timed(name, fn):
+        def run(*a, **k):
+            t0 = time.perf_counter()
+            try:
+                return fn(*a, **k)
+            finally:
+                spent[name] += time.perf_counter() - t0
+        return run
+
+    vl = MarkerDetector("DICT_4X4_50")
+    try:
+        for name, fn in originals.items():
+            setattr(det_mod, name, timed(name, fn))
+        t0 = time.perf_counter()
+        for _ in range(rounds):
+            for img in images:
+                vl.detect(img)
+        total = time.perf_counter() - t0
+    finally:
+        for name, fn in originals.items():
+            setattr(det_mod, name, fn)
+    n = rounds * len(images)
+    out = {STAGES[k]: 1e3 * v / n for k, v in spent.items()}
+    out["rest (Python glue, duplicates, results)"] = 1e3 * (total - sum(spent.values())) / n
+    out["total"] = 1e3 * total / n
+    return out
+
+
 def run_real(rounds):
     manifest = json.loads((ROOT / "datasets/real/manifest.json").read_text())
     rows = []
@@ -286,6 +332,14 @@ def markdown(result) -> str:
             exp = f"{r['expected_found']}/{r['expected']}" if "expected" in r else "–"
             ref = f"{r['reference_found']}/{r['reference']}" if "reference" in r else "–"
             lines.append(f"| {row['file']} | {m} | {r['detections']} | {exp} | {ref} | {fmt(r.get('max_corner_diff_px'), 2)} |")
+    if result.get("stages"):
+        sizes = list(result["stages"])
+        lines.append("\n**Where visloc's time goes** (mean ms per frame in each stage over the same DICT_4X4_50 "
+                     "frames; the timers add a little)\n")
+        lines.append("| stage | " + " | ".join(sizes) + " |")
+        lines.append("|---|" + "---|" * len(sizes))
+        for stage in result["stages"][sizes[0]]:
+            lines.append(f"| {stage} | " + " | ".join(fmt(result["stages"][sz][stage], 2) for sz in sizes) + " |")
     neg = result["negatives"]
     lines.append(f"\nMarker-free real photos ({neg['images']} scikit-image images x {len(neg['dictionaries'])} dictionaries): "
                  f"false positives visloc {neg['false_positives']['visloc']}, visloc_fast {neg['false_positives']['visloc_fast']}, "
@@ -309,6 +363,7 @@ def main(argv=None) -> int:
         key = f"{size[0]}x{size[1]} DICT_4X4_50"
         print(f"rendered {key} ...", file=sys.stderr, flush=True)
         result["rendered"][key] = run_rendered(size, make_methods("DICT_4X4_50", False), args.rounds, "DICT_4X4_50", sets, 1)
+    result["stages"] = {f"{w}x{h}": stage_times((w, h), sets, 1) for w, h in sizes}
     key = "640x480 DICT_APRILTAG_36h11"
     print(f"rendered {key} ...", file=sys.stderr, flush=True)
     at_sets = {k: v for k, v in sets.items() if k in ("easy", "hard")}

@@ -56,9 +56,15 @@ def square_to_quad(quads: NDArray) -> NDArray[np.float64]:
     g = (dx3 * dy2 - dx2 * dy3) / den
     h = (dx1 * dy3 - dx3 * dy1) / den
     H = np.empty((len(q), 3, 3))
-    H[:, 0] = np.stack([x1 - x0 + g * x1, x3 - x0 + h * x3, x0], axis=1)
-    H[:, 1] = np.stack([y1 - y0 + g * y1, y3 - y0 + h * y3, y0], axis=1)
-    H[:, 2] = np.stack([g, h, np.ones_like(g)], axis=1)
+    H[:, 0, 0] = x1 - x0 + g * x1
+    H[:, 0, 1] = x3 - x0 + h * x3
+    H[:, 0, 2] = x0
+    H[:, 1, 0] = y1 - y0 + g * y1
+    H[:, 1, 1] = y3 - y0 + h * y3
+    H[:, 1, 2] = y0
+    H[:, 2, 0] = g
+    H[:, 2, 1] = h
+    H[:, 2, 2] = 1.0
     return H
 
 

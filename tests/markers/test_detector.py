@@ -1,5 +1,7 @@
 """MarkerDetector on renders with exact ground truth, and its error handling."""
 
+import json
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -140,10 +142,14 @@ def test_trace_and_explain_pictures(tmp_path, detector):
     assert trace.binary.shape == (240, 320) and len(trace.passes) == len(detector.params.passes)
     stages = {c.stage for c in trace.candidates}
     assert "accepted" in stages
+    for ps in trace.passes:  # every outer border is kept for the picture, flagged by its hole
+        assert len(ps.enclosing) == len(ps.contours) > ps.enclosing.sum() > 0
     paths = write_explain(trace, tmp_path, stem="f0")
     names = {p.name for p in paths}
     assert {"f0_C_contours.png", "f0_D_radial.png", "f0_I_detections.png", "f0_candidates.json"} <= names
     assert all(p.stat().st_size > 0 for p in paths)
+    summary = json.loads((tmp_path / "f0_candidates.json").read_text())
+    assert [p["enclosing_a_hole"] for p in summary["passes"]] == [int(ps.enclosing.sum()) for ps in trace.passes]
 
 
 def test_each_marker_is_proposed_once_across_the_passes(detector):

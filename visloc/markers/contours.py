@@ -16,30 +16,38 @@ from numpy.typing import NDArray
 
 _NEXT = np.array([1, 2, 3, 0])
 
-__all__ = ["CandidateFilter", "filter_candidates", "find_contours"]
+__all__ = ["CandidateFilter", "filter_candidates", "find_contours", "outer_borders"]
 
 
-def find_contours(binary: NDArray[np.uint8], *, enclosing: bool = False) -> list[NDArray[np.int32]]:
-    """Stage 4: outer borders of the ink (255) regions of a binary image.
+def outer_borders(binary: NDArray[np.uint8]) -> tuple[list[NDArray[np.int32]], NDArray[np.bool_]]:
+    """Stage 4: outer borders of the ink (255) regions of a binary image, and which of them
+    enclose at least one hole.
 
     Returns a list of ``(N, 1, 2)`` int32 arrays (OpenCV's layout) of ``(x, y)`` pixel
-    centres, each a closed 8-connected border traced in order. Holes (inner borders) are
-    left out.
-
-    With ``enclosing=True`` only the borders of ink regions that enclose at least one hole
-    are returned: a marker's black frame always encloses its white cells, while most texture
-    blobs enclose nothing (on textured 640 x 480 frames, 41 of 1,800 outer borders).
+    centres, each a closed 8-connected border traced in order, and a bool array with one
+    flag per border. Holes (inner borders) are left out of the list.
     """
     if binary.ndim != 2 or binary.dtype != np.uint8:
         raise ValueError(f"binary must be a (H, W) uint8 image, got {binary.shape} {binary.dtype}")
     contours, hierarchy = cv2.findContours(binary, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
     if hierarchy is None:
-        return []
+        return [], np.zeros(0, bool)
     h = hierarchy[0]
-    outer = h[:, 3] < 0  # no parent: an outer border (RETR_CCOMP: holes are the children)
-    if enclosing:
-        outer &= h[:, 2] >= 0  # ... with a child: it encloses a hole
-    return [contours[i] for i in np.flatnonzero(outer)]
+    outer = np.flatnonzero(h[:, 3] < 0)  # no parent: an outer border (RETR_CCOMP: holes are the children)
+    return [contours[i] for i in outer], h[outer, 2] >= 0  # a child: it encloses a hole
+
+
+def find_contours(binary: NDArray[np.uint8], *, enclosing: bool = False) -> list[NDArray[np.int32]]:
+    """Stage 4: the outer borders of :func:`outer_borders`.
+
+    With ``enclosing=True`` only the borders of ink regions that enclose at least one hole
+    are returned: a marker's black frame always encloses its white cells, while most texture
+    blobs enclose nothing (on textured 640 x 480 frames, 41 of 1,800 outer borders).
+    """
+    contours, holes = outer_borders(binary)
+    if not enclosing:
+        return contours
+    return [contours[i] for i in np.flatnonzero(holes)]
 
 
 @dataclass(frozen=True)

@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from visloc.markers.binarize import blur, default_window, threshold, to_gray
 from visloc.markers.bits import CellSample, decode, read_bits, sample_cells
-from visloc.markers.contours import CandidateFilter, filter_candidates, find_contours
+from visloc.markers.contours import CandidateFilter, filter_candidates, find_contours, outer_borders
 from visloc.markers.corners import _NEXT, RadialSplit
 from visloc.markers.corners_batch import fit_quads
 from visloc.markers.dictionary import Dictionary, load_dictionary
@@ -137,13 +137,16 @@ class CandidateTrace:
 
 @dataclass(frozen=True, eq=False)
 class PassTrace:
-    """Stages 2-4 of one search pass."""
+    """Stages 2-4 of one search pass: every outer border of the binary image (``contours``,
+    in the pass image's pixels) and whether it encloses a hole (``enclosing``; only those
+    go on to stage 5)."""
 
     scale: float
     window: int
     blurred: NDArray[np.uint8]
     binary: NDArray[np.uint8]
     contours: list[NDArray[np.int32]]
+    enclosing: NDArray[np.bool_]
 
 
 @dataclass(frozen=True, eq=False)
@@ -233,9 +236,12 @@ class MarkerDetector:
         blurred = blur(work, p.blur_sigma)  # stage 2
         binary = threshold(blurred, window=window, offset=p.offset)  # stage 3
         # stage 4; a marker's frame encloses its white cells, so ink without a hole is no marker
-        contours = find_contours(binary, enclosing=True)
-        if log is not None:
-            log["passes"].append(PassTrace(float(scale[0]), window, blurred, binary, contours))
+        if log is None:
+            contours = find_contours(binary, enclosing=True)
+        else:
+            everything, holes = outer_borders(binary)
+            log["passes"].append(PassTrace(float(scale[0]), window, blurred, binary, everything, holes))
+            contours = [everything[i] for i in np.flatnonzero(holes)]
         if len(seen) and contours:
             box = np.array([cv2.boundingRect(c) for c in contours], np.float64).reshape(-1, 2, 2)
             lo = (box[:, 0] + 0.5) * scale - 0.5  # first and last pixel centres, full resolution

@@ -1,7 +1,9 @@
 """Pictures of every detector stage, so a user can see why a marker was missed.
 
-The panels follow the report's Figure G.1: B binary image, C contours, D radial distance
-profiles with their peaks, E side groups, F fitted corners, G sampled bits, I detections.
+The panels follow the report's Figure G.1: B binary image, C contours (grey: borders that
+enclose no hole, which no marker's can; orange: the ones the candidate filter saw; thick:
+candidates, coloured by the stage they stopped at), D radial distance profiles with their
+peaks, E side groups, F fitted corners, G sampled bits, I detections.
 Each candidate also gets a line in ``<stem>_candidates.json`` naming the stage it stopped at.
 """
 
@@ -100,8 +102,9 @@ def explain_panels(trace: DetectionTrace, max_candidates: int = 48) -> dict[str,
     c_img = _bgr(trace.gray // 2 + 64)
     for k, ps in enumerate(trace.passes):
         panels[f"B_binary_pass{k}"] = _bgr(ps.binary)
-        for contour in ps.contours:
-            _poly(c_img, _full(contour, ps.scale), (0, 160, 255))
+        for contour, encloses in zip(ps.contours, ps.enclosing.tolist(), strict=True):
+            # grey: encloses no hole (no marker can); orange: went on to the candidate filter
+            _poly(c_img, _full(contour, ps.scale), (0, 160, 255) if encloses else (150, 150, 150))
     for c in cands:
         _poly(c_img, _full(c.contour, c.scale), _STAGE_COLOURS[c.stage], thickness=2)
     panels["C_contours"] = c_img
@@ -161,7 +164,8 @@ def write_explain(trace: DetectionTrace, outdir: str | Path, stem: str = "frame"
             row["bits"] = c.bits.astype(int).tolist()
         rows.append(row)
     summary = {
-        "passes": [{"scale": ps.scale, "window": ps.window, "contours": len(ps.contours)} for ps in trace.passes],
+        "passes": [{"scale": ps.scale, "window": ps.window, "contours": len(ps.contours),
+                    "enclosing_a_hole": int(ps.enclosing.sum())} for ps in trace.passes],
         "candidates": rows,
         "detections": [d.to_dict() for d in trace.detections],
     }

@@ -98,10 +98,6 @@ class MapPose:
                 "unknown": self.unknown}
 
 
-def _params_of(R: FloatArray, t: FloatArray) -> FloatArray:
-    return np.concatenate([t, matrix_to_euler(R)])
-
-
 def estimate_camera_pose(
     detections: list[MarkerDetection],
     marker_map: MarkerMap,
@@ -152,22 +148,23 @@ def estimate_camera_pose(
     # start: the own poses (and their flips) of the largest markers in the image, moved into the
     # map frame; the one that reprojects all map corners best
     area = [abs(_area(d.corners)) for d in known]
-    starts = []
+    start_R, start_t = [], []
     for j in np.argsort(area)[::-1][:n_starts]:
         i = ids[j]
-        L = float(np.linalg.norm(marker_map.corners_of(i)[1] - marker_map.corners_of(i)[0]))
+        L = float(np.linalg.norm(obj[j, 1] - obj[j, 0]))
         try:  # both closed-form planar poses of the marker: the joint fit refines the start
             Rs, ts = planar_solutions(xy[j], L)
         except np.linalg.LinAlgError:
             continue
-        T_map_marker_inv = marker_map.marker_pose(i).inverse()
-        for R, t in zip(Rs, ts, strict=True):
-            if t[2] > 0:  # in front of the camera
-                T_cam_map = Pose(R, t).compose(T_map_marker_inv)
-                starts.append(_params_of(T_cam_map.R, T_cam_map.t))
-    if not starts:
+        inv = marker_map.marker_pose(i).inverse()  # T_marker_map
+        front = ts[:, 2] > 0  # in front of the camera
+        start_R.append(Rs[front] @ inv.R)  # T_cam_marker composed with T_marker_map
+        start_t.append(Rs[front] @ inv.t + ts[front])
+    if not start_R or not sum(map(len, start_R)):
         return None
-    fit = (_marker_rms(np.array(starts), obj, xy, f) ** 2).mean(axis=-1)  # per start
+    R_s = np.concatenate(start_R)
+    starts = np.concatenate([np.concatenate(start_t), matrix_to_euler(R_s)], axis=1)
+    fit = (_marker_rms(starts, obj, xy, f) ** 2).mean(axis=-1)  # per start
     keep = np.ones(len(ids), bool)
     rejected: list[int] = []
     params = np.array(starts[int(np.argmin(fit))])[None]
@@ -178,7 +175,7 @@ def estimate_camera_pose(
         best = p[int(np.argmin(np.atleast_1d(sse)))]
         res = _marker_rms(best, obj, xy, f)
         used_res = res[keep]
-        limit = max(max_residual, 3.0 * float(np.median(used_res)))
+        limit = max(max_residual, 3.0 * _median(used_res.tolist()))
         worst = int(np.argmax(np.where(keep, res, -1.0)))
         if keep.sum() <= 1 or res[worst] <= limit:
             break
@@ -195,6 +192,13 @@ def estimate_camera_pose(
     pose = Pose(R, best[:3].copy(), rms, cov)
     return MapPose(pose, [i for i, k in zip(ids, keep, strict=True) if k], rejected, unknown,
                    {i: float(r) for i, r in zip(ids, res, strict=True)})
+
+
+def _median(values: list[float]) -> float:
+    """Median of a short list (np.median costs more than the sort for a frame's markers)."""
+    v = sorted(values)
+    h = len(v) // 2
+    return v[h] if len(v) % 2 else 0.5 * (v[h - 1] + v[h])
 
 
 def _area(corners: FloatArray) -> float:

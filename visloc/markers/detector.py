@@ -400,6 +400,8 @@ def _distinct(quads: NDArray) -> NDArray[np.intp]:
 def _merge_duplicates(found: list[tuple[MarkerDetection, float]]) -> list[MarkerDetection]:
     """Keep one detection per physical marker: of two with the same id whose centres are
     closer than half the smaller one's side, the larger (outer) one stays."""
+    if len({d.id for d, _ in found}) == len(found):  # the common case: every id once
+        return sorted((d for d, _ in found), key=lambda d: (d.id, d.corners[0, 1], d.corners[0, 0]))
     found = sorted(found, key=lambda fa: -fa[1])
     kept: list[int] = []
     if found:
@@ -408,7 +410,7 @@ def _merge_duplicates(found: list[tuple[MarkerDetection, float]]) -> list[Marker
         c = np.array([d.corners for d, _ in found]).mean(axis=1)
         d2 = ((c[:, None, :] - c[None, :, :]) ** 2).sum(axis=2)
         dup = np.tril((ids[:, None] == ids[None, :]) & (d2 < 0.25 * np.minimum(area[:, None], area[None, :])), -1)
-        if not dup.any():  # the common case: every marker found once
+        if not dup.any():  # one id on several markers far apart: all stay
             kept = list(range(len(found)))
         else:
             for i in range(len(found)):

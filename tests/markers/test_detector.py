@@ -152,14 +152,23 @@ def test_trace_and_explain_pictures(tmp_path, detector):
     assert [p["enclosing_a_hole"] for p in summary["passes"]] == [int(ps.enclosing.sum()) for ps in trace.passes]
 
 
-def test_each_marker_is_proposed_once_across_the_passes(detector):
-    scene = random_scene(3, size=(320, 240), difficulty="easy")
-    trace = detector.trace(scene.image)
-    # the coarse pass sees the same markers again, but skips them before its filter
-    assert len(trace.passes) == 2 and len(trace.passes[1].contours) > 0
-    accepted = [c for c in trace.candidates if c.stage == "accepted"]
-    assert len(accepted) == len(trace.detections) > 0
-    assert {c.scale for c in accepted} == {1.0}
+def test_the_coarse_pass_skips_markers_the_fine_pass_proposed(detector, monkeypatch):
+    import visloc.markers.detector as det_mod
+
+    filtered = []
+    original = det_mod.filter_candidates
+
+    def counting(contours, shape, params):
+        filtered.append(len(contours))
+        return original(contours, shape, params)
+
+    monkeypatch.setattr(det_mod, "filter_candidates", counting)
+    trace = detector.trace(random_scene(3, size=(320, 240), difficulty="easy").image)
+    enclosing = [int(ps.enclosing.sum()) for ps in trace.passes]
+    assert len(trace.detections) > 0 and enclosing[1] > 0
+    assert filtered[0] == enclosing[0]  # the fine pass filters every border that encloses a hole
+    assert filtered[1] < enclosing[1]  # the coarse pass sees the markers again and skips them
+    assert {c.scale for c in trace.candidates if c.stage == "accepted"} == {1.0}
 
 
 def test_same_box_matches_boxes_by_centre_and_size():

@@ -20,7 +20,7 @@ def warn(command: str, text: str) -> None:
 def detector_for(args: argparse.Namespace) -> MarkerDetector:
     """The marker detector of ``--dict``; with ``--fast`` it searches shrunk images
     (:data:`visloc.markers.FAST_PASSES`)."""
-    if getattr(args, "fast", False):
+    if args.fast:
         return MarkerDetector(args.dict, passes=FAST_PASSES)
     return MarkerDetector(args.dict)
 

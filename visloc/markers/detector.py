@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from visloc.markers.binarize import blur, default_window, threshold, to_gray
 from visloc.markers.bits import CellSample, decode, read_bits, sample_cells
-from visloc.markers.contours import CandidateFilter, filter_candidates, find_contours, outer_borders
+from visloc.markers.contours import CandidateFilter, filter_candidates, outer_borders
 from visloc.markers.corners import _NEXT, RadialSplit
 from visloc.markers.corners_batch import fit_quads
 from visloc.markers.dictionary import Dictionary, load_dictionary
@@ -235,13 +235,11 @@ class MarkerDetector:
         p = self.params
         blurred = blur(work, p.blur_sigma)  # stage 2
         binary = threshold(blurred, window=window, offset=p.offset)  # stage 3
-        # stage 4; a marker's frame encloses its white cells, so ink without a hole is no marker
-        if log is None:
-            contours = find_contours(binary, enclosing=True)
-        else:
-            everything, holes = outer_borders(binary)
+        everything, holes = outer_borders(binary)  # stage 4
+        if log is not None:
             log["passes"].append(PassTrace(float(scale[0]), window, blurred, binary, everything, holes))
-            contours = [everything[i] for i in np.flatnonzero(holes)]
+        # a marker's frame encloses its white cells, so ink without a hole is no marker
+        contours = [everything[i] for i in np.flatnonzero(holes)]
         if len(seen) and contours:
             box = np.array([cv2.boundingRect(c) for c in contours], np.float64).reshape(-1, 2, 2)
             lo = (box[:, 0] + 0.5) * scale - 0.5  # first and last pixel centres, full resolution

@@ -14,6 +14,7 @@ disagree with the rest are dropped and the fit repeated.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from statistics import median
 
 import numpy as np
 from numpy.typing import NDArray
@@ -160,9 +161,8 @@ def estimate_camera_pose(
         front = ts[:, 2] > 0  # in front of the camera
         start_R.append(Rs[front] @ inv.R)  # T_cam_marker composed with T_marker_map
         start_t.append(Rs[front] @ inv.t + ts[front])
-    if not start_R or not sum(map(len, start_R)):
+    if not start_R or not (R_s := np.concatenate(start_R)).size:
         return None
-    R_s = np.concatenate(start_R)
     starts = np.concatenate([np.concatenate(start_t), matrix_to_euler(R_s)], axis=1)
     fit = (_marker_rms(starts, obj, xy, f) ** 2).mean(axis=-1)  # per start
     keep = np.ones(len(ids), bool)
@@ -175,7 +175,7 @@ def estimate_camera_pose(
         best = p[int(np.argmin(np.atleast_1d(sse)))]
         res = _marker_rms(best, obj, xy, f)
         used_res = res[keep]
-        limit = max(max_residual, 3.0 * _median(used_res.tolist()))
+        limit = max(max_residual, 3.0 * median(used_res.tolist()))  # a few values: no numpy
         worst = int(np.argmax(np.where(keep, res, -1.0)))
         if keep.sum() <= 1 or res[worst] <= limit:
             break
@@ -192,13 +192,6 @@ def estimate_camera_pose(
     pose = Pose(R, best[:3].copy(), rms, cov)
     return MapPose(pose, [i for i, k in zip(ids, keep, strict=True) if k], rejected, unknown,
                    {i: float(r) for i, r in zip(ids, res, strict=True)})
-
-
-def _median(values: list[float]) -> float:
-    """Median of a short list (np.median costs more than the sort for a frame's markers)."""
-    v = sorted(values)
-    h = len(v) // 2
-    return v[h] if len(v) % 2 else 0.5 * (v[h - 1] + v[h])
 
 
 def _area(corners: FloatArray) -> float:

@@ -58,6 +58,10 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
+#: help of ``--fast`` (detect, localize, track): ``visloc.markers.FAST_PASSES``
+_FAST_HELP = "search shrunk images only: about 30%% faster at 640x480 and above, misses markers under about 20 px"
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``visloc`` argument parser with its sub-commands."""
     parser = _Parser(
@@ -83,9 +87,7 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--explain", metavar="DIR", help="write every detector stage's picture per frame")
     d.add_argument("--fps", type=_positive, help="frame rate for image lists (frame times)")
     d.add_argument("--max-frames", type=_count, metavar="N", help="stop after N frames")
-    d.add_argument("--fast", action="store_true",
-                    help="search shrunk images only: about 30%% faster at 640x480 and above, "
-                    "misses markers under about 20 px")
+    d.add_argument("--fast", action="store_true", help=_FAST_HELP)
     d.add_argument("--quiet", action="store_true", help="no progress bar or summary")
 
     r = sub.add_parser("render", help="render synthetic data with exact ground truth")
@@ -144,9 +146,7 @@ def build_parser() -> argparse.ArgumentParser:
     lz.add_argument("--out", metavar="FILE.csv", help="write one row per frame")
     lz.add_argument("--rerun", metavar="FILE.rrd", help="write a rerun recording (estimate vs truth)")
     lz.add_argument("--max-frames", type=_count, metavar="N", help="stop after N frames")
-    lz.add_argument("--fast", action="store_true",
-                    help="search shrunk images only: about 30%% faster at 640x480 and above, "
-                    "misses markers under about 20 px")
+    lz.add_argument("--fast", action="store_true", help=_FAST_HELP)
     lz.add_argument("--quiet", action="store_true", help="no progress bar or summary")
 
     tk = sub.add_parser("track", help="a body's markers relative to reference markers, seen by a fixed camera")
@@ -162,9 +162,7 @@ def build_parser() -> argparse.ArgumentParser:
     tk.add_argument("--poles", type=float, nargs=2, default=(-4.0, -4.0), metavar="P",
                     help="velocity observer poles, 1/s (report eq. 3.14; default -4 -4)")
     tk.add_argument("--max-frames", type=_count, metavar="N", help="stop after N frames")
-    tk.add_argument("--fast", action="store_true",
-                    help="search shrunk images only: about 30%% faster at 640x480 and above, "
-                    "misses markers under about 20 px")
+    tk.add_argument("--fast", action="store_true", help=_FAST_HELP)
     tk.add_argument("--quiet", action="store_true", help="no progress bar or summary")
 
     md = sub.add_parser("model", help="the AR.Drone 2.0 model: identified parameters, hover trim, linear poles")

@@ -189,7 +189,7 @@ def run_rendered(size, methods, rounds, dict_name, sets, seed0):
 
 
 #: the detector's stage functions whose time :func:`stage_times` measures, in pipeline order
-STAGES = {"blur": "2 blur", "threshold": "3 threshold", "find_contours": "4 contours",
+STAGES = {"blur": "2 blur", "threshold": "3 threshold", "enclosing_borders": "4 contours",
           "filter_candidates": "5 filter", "fit_quads": "6-7 corner split + line fits",
           "refine_quads": "8 edge refinement", "sample_cells": "9 cell sampling (both looks)",
           "read_bits": "9 bits", "decode": "10 dictionary"}

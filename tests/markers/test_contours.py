@@ -1,5 +1,6 @@
 import cv2
 import numpy as np
+import pytest
 
 from visloc.markers.contours import CandidateFilter, filter_candidates, find_contours
 
@@ -62,3 +63,74 @@ def test_filter_perimeter_bounds_follow_the_image_size():
     cs = find_contours(b)
     assert len(filter_candidates(cs, b.shape)) == 1
     assert filter_candidates(cs, b.shape, CandidateFilter(min_perimeter_rate=0.5)) == []
+
+
+def _engines():
+    from visloc.markers.contours import NATIVE_BORDERS
+
+    return [False, True] if NATIVE_BORDERS else [False]
+
+
+def _reference(binary, lo=1, hi=10**9):
+    from visloc.markers.contours import outer_borders
+
+    cs, holes = outer_borders(binary)
+    return [cs[i].reshape(-1, 2) for i in np.flatnonzero(holes) if lo <= len(cs[i]) <= hi]
+
+
+@pytest.mark.parametrize("native", _engines())
+def test_enclosing_borders_match_opencv_point_for_point(native):
+    from visloc.markers.binarize import blur, threshold, to_gray
+    from visloc.markers.contours import enclosing_borders
+    from visloc.synth import random_scene
+
+    rng = np.random.default_rng(5)
+    images = [((rng.random((rng.integers(1, 30), rng.integers(1, 30))) < p) * 255).astype(np.uint8)
+              for p in (0.3, 0.5, 0.7) for _ in range(100)]
+    for k, name in enumerate(["easy", "hard", "small", "empty"]):
+        gray = to_gray(random_scene(k, size=(320, 240), difficulty=name).image)
+        images.append(threshold(blur(gray, 0.6), window=9, offset=7))
+    images.append(np.full((7, 9), 255, np.uint8))  # ink everywhere, touching the image border
+    images.append(np.zeros((5, 5), np.uint8))
+    n_found = 0
+    for b in images:
+        got = enclosing_borders(b, native=native)
+        want = _reference(b)
+        assert len(got) == len(want)
+        assert all(g.dtype == np.int32 and np.array_equal(g, w) for g, w in zip(got, want, strict=True))
+        n_found += len(got)
+        sub = enclosing_borders(b, 8, 40, native=native)
+        assert all(np.array_equal(g, w) for g, w in zip(sub, _reference(b, 8, 40), strict=True))
+    assert n_found > 100  # the comparison saw many borders
+
+
+@pytest.mark.parametrize("native", _engines())
+def test_enclosing_borders_nested_regions(native):
+    from visloc.markers.contours import enclosing_borders
+
+    b = _ink((60, 60))
+    b[2:58, 2:58] = 255  # a ring ...
+    b[6:54, 6:54] = 0
+    b[12:48, 12:48] = 255  # ... with a ring in its hole ...
+    b[16:44, 16:44] = 0
+    b[25:35, 25:35] = 255  # ... with a solid square in that one's hole
+    cs = enclosing_borders(b, native=native)
+    assert sorted(int(c[:, 0].min()) for c in cs) == [2, 12]
+
+
+def test_enclosing_borders_rejects_bad_input():
+    from visloc.markers.contours import enclosing_borders
+
+    with pytest.raises(ValueError, match="binary"):
+        enclosing_borders(np.zeros((4, 4, 3), np.uint8))
+    with pytest.raises(ValueError, match="binary"):
+        enclosing_borders(np.zeros((4, 4), np.float32))
+
+
+def test_the_compiled_follower_is_used_when_built():
+    from visloc.markers import contours
+
+    assert contours.NATIVE_BORDERS == (contours._borders is not None)
+    if not contours.NATIVE_BORDERS:
+        with pytest.raises(RuntimeError, match="not built"):
+            contours.enclosing_borders(_ink(), native=True)

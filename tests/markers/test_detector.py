@@ -7,6 +7,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from visloc.markers import MarkerDetector
+from visloc.markers.contours import CandidateFilter, perimeter_bounds
 from visloc.markers.explain import write_explain
 from visloc.synth import default_camera, random_scene, render_markers
 from visloc.types import Pose
@@ -166,7 +167,10 @@ def test_the_coarse_pass_skips_markers_the_fine_pass_proposed(detector, monkeypa
     trace = detector.trace(random_scene(3, size=(320, 240), difficulty="easy").image)
     enclosing = [int(ps.enclosing.sum()) for ps in trace.passes]
     assert len(trace.detections) > 0 and enclosing[1] > 0
-    assert filtered[0] == enclosing[0]  # the fine pass filters every border that encloses a hole
+    # the fine pass filters every border that encloses a hole and has a candidate's length
+    lo, hi = perimeter_bounds(trace.passes[0].binary.shape, CandidateFilter())
+    in_bounds = [lo <= len(c) <= hi for c in trace.passes[0].contours]
+    assert filtered[0] == int((trace.passes[0].enclosing & np.array(in_bounds)).sum()) > 0
     assert filtered[1] < enclosing[1]  # the coarse pass sees the markers again and skips them
     assert {c.scale for c in trace.candidates if c.stage == "accepted"} == {1.0}
 

@@ -9,6 +9,7 @@ border of a marker's black frame never becomes a second candidate.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from itertools import pairwise
 
 import cv2
 import numpy as np
@@ -16,7 +17,16 @@ from numpy.typing import NDArray
 
 _NEXT = np.array([1, 2, 3, 0])
 
-__all__ = ["CandidateFilter", "filter_candidates", "find_contours", "outer_borders"]
+try:
+    from visloc.markers import _borders
+except ImportError:  # the package was installed without a C compiler: OpenCV's follower
+    _borders = None
+
+#: Whether :func:`enclosing_borders` runs the compiled border follower.
+NATIVE_BORDERS = _borders is not None
+
+__all__ = ["NATIVE_BORDERS", "CandidateFilter", "enclosing_borders", "filter_candidates", "find_contours",
+           "outer_borders", "perimeter_bounds"]
 
 
 def outer_borders(binary: NDArray[np.uint8]) -> tuple[list[NDArray[np.int32]], NDArray[np.bool_]]:
@@ -35,6 +45,33 @@ def outer_borders(binary: NDArray[np.uint8]) -> tuple[list[NDArray[np.int32]], N
     h = hierarchy[0]
     outer = np.flatnonzero(h[:, 3] < 0)  # no parent: an outer border (RETR_CCOMP: holes are the children)
     return [contours[i] for i in outer], h[outer, 2] >= 0  # a child: it encloses a hole
+
+
+def enclosing_borders(binary: NDArray[np.uint8], min_len: int = 1, max_len: int | None = None, *,
+                      native: bool | None = None) -> list[NDArray[np.int32]]:
+    """Stage 4 as the detector runs it: the outer borders of the ink regions that enclose at
+    least one hole, with ``min_len <= points <= max_len``.
+
+    The same borders, in the same order and point for point, as
+    ``outer_borders(binary)`` filtered by its hole flags, as ``(N, 2)`` int32 arrays.
+    ``native`` picks the compiled follower (``True``) or ``cv2.findContours`` (``False``);
+    ``None`` uses the compiled one when it was built (:data:`NATIVE_BORDERS`).
+    """
+    if binary.ndim != 2 or binary.dtype != np.uint8:
+        raise ValueError(f"binary must be a (H, W) uint8 image, got {binary.shape} {binary.dtype}")
+    hi = np.iinfo(np.int64).max if max_len is None else int(max_len)
+    if native is None:
+        native = NATIVE_BORDERS
+    if native:
+        if _borders is None:
+            raise RuntimeError("visloc.markers._borders was not built (no C compiler at install)")
+        b = np.ascontiguousarray(binary)
+        raw, raw_offsets, _ = _borders.enclosing_borders(b, b.shape[0], b.shape[1], int(min_len), hi)
+        pts = np.frombuffer(raw, np.int32).reshape(-1, 2)
+        at = np.frombuffer(raw_offsets, np.int64).tolist()
+        return [pts[a:e] for a, e in pairwise(at)]
+    contours, holes = outer_borders(binary)
+    return [contours[i].reshape(-1, 2) for i in np.flatnonzero(holes) if min_len <= len(contours[i]) <= hi]
 
 
 def find_contours(binary: NDArray[np.uint8], *, enclosing: bool = False) -> list[NDArray[np.int32]]:
@@ -95,6 +132,14 @@ def _on_sides(contour: NDArray, quad: NDArray, tol: float) -> float:
     return float(((d * d).sum(axis=2).min(axis=1) <= tol * tol).mean())
 
 
+def perimeter_bounds(image_shape: tuple[int, ...], params: CandidateFilter = CandidateFilter()) -> tuple[int, int]:
+    """Stage 5's first test: the fewest and most contour points a candidate may have in an
+    image of ``image_shape`` (``min_len``, ``max_len`` of :func:`enclosing_borders`)."""
+    size = max(image_shape[:2])
+    lo = max(params.min_perimeter_rate * size, 2.8 * params.min_side)  # 8-connected: >= 2 sqrt(2) side
+    return int(np.ceil(lo)), int(np.floor(params.max_perimeter_rate * size))
+
+
 def filter_candidates(
     contours: list[NDArray[np.int32]],
     image_shape: tuple[int, ...],
@@ -113,9 +158,7 @@ def filter_candidates(
         approximating polygon.
     """
     h, w = image_shape[:2]
-    size = max(h, w)
-    lo = max(params.min_perimeter_rate * size, 2.8 * params.min_side)  # 8-connected: >= 2 sqrt(2) side
-    hi = params.max_perimeter_rate * size
+    lo, hi = perimeter_bounds(image_shape, params)
     lengths = np.array(list(map(len, contours)), np.int64)
     keep = np.flatnonzero((lengths >= lo) & (lengths <= hi))
     bd = params.border_distance

@@ -27,7 +27,13 @@ from numpy.typing import NDArray
 
 from visloc.markers.binarize import blur, default_window, threshold, to_gray
 from visloc.markers.bits import CellSample, decode, read_bits, sample_cells
-from visloc.markers.contours import CandidateFilter, filter_candidates, outer_borders
+from visloc.markers.contours import (
+    CandidateFilter,
+    enclosing_borders,
+    filter_candidates,
+    outer_borders,
+    perimeter_bounds,
+)
 from visloc.markers.corners import _NEXT, RadialSplit
 from visloc.markers.corners_batch import fit_quads
 from visloc.markers.dictionary import Dictionary, load_dictionary
@@ -235,18 +241,19 @@ class MarkerDetector:
         p = self.params
         blurred = blur(work, p.blur_sigma)  # stage 2
         binary = threshold(blurred, window=window, offset=p.offset)  # stage 3
-        everything, holes = outer_borders(binary)  # stage 4
+        candidates = replace(p.candidates, min_side=min_side)
+        # stage 4: a marker's frame encloses its white cells, so ink without a hole is no marker
+        contours = enclosing_borders(binary, *perimeter_bounds(work.shape, candidates))
         if log is not None:
+            everything, holes = outer_borders(binary)  # every border, for the pictures
             log["passes"].append(PassTrace(float(scale[0]), window, blurred, binary, everything, holes))
-        # a marker's frame encloses its white cells, so ink without a hole is no marker
-        contours = [everything[i] for i in np.flatnonzero(holes)]
         if len(seen) and contours:
             box = np.array([cv2.boundingRect(c) for c in contours], np.float64).reshape(-1, 2, 2)
             lo = (box[:, 0] + 0.5) * scale - 0.5  # first and last pixel centres, full resolution
             hi = (box[:, 0] + box[:, 1] - 0.5) * scale - 0.5
             new = ~_same_box(np.stack([lo, hi], axis=1), np.stack([seen.min(axis=1), seen.max(axis=1)], axis=1))
             contours = [contours[i] for i in np.flatnonzero(new)]
-        return filter_candidates(contours, work.shape, replace(p.candidates, min_side=min_side))  # 5
+        return filter_candidates(contours, work.shape, candidates)  # 5
 
     def _run(self, image: NDArray[np.uint8], log: dict | None) -> list[MarkerDetection]:
         p = self.params

@@ -6,7 +6,7 @@ import pytest
 
 from visloc.markers import MarkerDetector
 from visloc.markers.corners import fit_quad
-from visloc.markers.corners_batch import fit_quads
+from visloc.markers.corners_batch import NATIVE_QUADS, fit_quads
 from visloc.synth import random_scene
 
 
@@ -32,10 +32,14 @@ def contours_and_hints():
     return contours, np.array(hints)
 
 
-def test_batch_equals_single(contours_and_hints):
+ENGINES = [False, True] if NATIVE_QUADS else [False]  # numpy, and the compiled one when built
+
+
+@pytest.mark.parametrize("native", ENGINES)
+def test_batch_equals_single(contours_and_hints, native):
     contours, hints = contours_and_hints
     assert len(contours) > 50
-    corners, ok, splits = fit_quads(contours, hints, splits=True)
+    corners, ok, splits = fit_quads(contours, hints, splits=True, native=native)
     found = 0
     for i, c in enumerate(contours):
         single = fit_quad(c, hint=hints[i])
@@ -51,11 +55,35 @@ def test_batch_equals_single(contours_and_hints):
     assert found > 30
 
 
-def test_without_hints_and_empty(contours_and_hints):
+@pytest.mark.parametrize("native", ENGINES)
+def test_without_hints_and_empty(contours_and_hints, native):
     contours, _ = contours_and_hints
-    corners, ok, splits = fit_quads(contours[:20])
+    corners, ok, splits = fit_quads(contours[:20], native=native)
     for i in range(20):
-        assert (fit_quad(contours[i]) is not None) == bool(ok[i])
+        single = fit_quad(contours[i])
+        assert (single is not None) == bool(ok[i])
+        if single is not None:
+            np.testing.assert_allclose(corners[i], single[0], atol=1e-9)
     assert splits is None
-    corners, ok, splits = fit_quads([], splits=True)
+    corners, ok, splits = fit_quads([], splits=True, native=native)
     assert corners.shape == (0, 4, 2) and ok.shape == (0,) and splits == []
+
+
+@pytest.mark.parametrize("native", ENGINES)
+def test_a_given_smoothing_width_is_used(contours_and_hints, native):
+    contours, hints = contours_and_hints
+    corners, ok, _ = fit_quads(contours[:30], hints[:30], sigma=2.5, native=native)
+    for i in range(30):
+        single = fit_quad(contours[i], sigma=2.5, hint=hints[i])
+        assert (single is not None) == bool(ok[i])
+        if single is not None:
+            np.testing.assert_allclose(corners[i], single[0], atol=1e-9)
+
+
+def test_bad_input_is_named():
+    square = np.array([[0, 0], [5, 0], [5, 5], [0, 5]], np.int32)
+    with pytest.raises(ValueError, match="sigma"):
+        fit_quads([square], sigma=0.0)
+    if NATIVE_QUADS:
+        with pytest.raises(ValueError, match="at least 4 points"):
+            fit_quads([square[:3]], native=True)

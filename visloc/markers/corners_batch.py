@@ -16,6 +16,11 @@ counterpart:
   higher of the two valleys between neighbouring chosen peaks; at least four above
   ``0.01 mean + 0.1``, the four most prominent kept;
 - the polygon ``hint`` where that fails; :func:`split_sides`; :func:`fit_lines`.
+
+The same steps compiled (``visloc.markers._quads``, built with the package) run one contour
+after another without the padding and the per-step numpy calls, about ten times faster for a
+frame's worth of candidates; both agree to about 1e-12 px. Without the compiled module the
+numpy version here runs.
 """
 
 from __future__ import annotations
@@ -26,7 +31,15 @@ from numpy.typing import NDArray
 
 from visloc.markers.corners import _NEXT, RadialSplit, fit_lines, profile_stride, quad_from_lines
 
-__all__ = ["fit_quads"]
+try:
+    from visloc.markers import _quads
+except ImportError:  # installed without a C compiler: the numpy version below
+    _quads = None
+
+#: Whether :func:`fit_quads` runs the compiled stages 6-7.
+NATIVE_QUADS = _quads is not None
+
+__all__ = ["NATIVE_QUADS", "fit_quads"]
 
 _NEG = -np.inf
 
@@ -121,6 +134,7 @@ def fit_quads(
     sigma: float | None = None,
     padding: float = 0.1,
     splits: bool = False,
+    native: bool | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_], list[RadialSplit | None] | None]:
     """Stages 6-7 for K contours: what :func:`visloc.markers.corners.fit_quad` does for one.
 
@@ -134,7 +148,11 @@ def fit_quads(
     sigma, padding
         As for :func:`fit_quad`.
     splits : bool
-        Also return the :class:`RadialSplit` of each contour (for traces).
+        Also return the :class:`RadialSplit` of each contour (for traces; computed by the numpy
+        version).
+    native : bool or None
+        Run the compiled version (``True``) or the numpy one (``False``); ``None``: the
+        compiled one when it was built (:data:`NATIVE_QUADS`).
 
     Returns
     -------
@@ -148,6 +166,31 @@ def fit_quads(
     k = len(contours)
     if k == 0:
         return np.zeros((0, 4, 2)), np.zeros(0, bool), [] if splits else None
+    if sigma is not None and not sigma > 0:
+        raise ValueError(f"sigma must be > 0 (or None), got {sigma}")
+    if native is None:
+        native = NATIVE_QUADS
+    if not native:
+        return _fit_quads_numpy(contours, hints, sigma, padding, splits)
+    if _quads is None:
+        raise RuntimeError("visloc.markers._quads was not built (no C compiler at install)")
+    lengths = np.array([len(c) for c in contours], np.int64)
+    if (lengths < 4).any():
+        raise ValueError(f"contours need at least 4 points each, got {int(lengths.min())}")
+    pts = np.ascontiguousarray(np.concatenate([np.asarray(c).reshape(-1, 2) for c in contours]), np.int32)
+    offsets = np.concatenate([[0], np.cumsum(lengths)])
+    h = None if hints is None else np.ascontiguousarray(np.asarray(hints, np.float64).reshape(k, 4, 2))
+    raw, raw_ok = _quads.fit_quads(pts, offsets, h, 0.0 if sigma is None else float(sigma), float(padding))
+    corners = np.frombuffer(raw, np.float64).reshape(k, 4, 2).copy()
+    ok = np.frombuffer(raw_ok, np.uint8).astype(bool)
+    out_splits = _fit_quads_numpy(contours, hints, sigma, padding, True)[2] if splits else None
+    return corners, ok, out_splits
+
+
+def _fit_quads_numpy(contours: list[NDArray], hints: NDArray | None, sigma: float | None, padding: float,
+                     splits: bool) -> tuple[NDArray[np.float64], NDArray[np.bool_], list[RadialSplit | None] | None]:
+    """:func:`fit_quads` in numpy over a padded (K, N_max) array of all the contours."""
+    k = len(contours)
     pts, n, valid = _pack(contours)
     rows = np.arange(k)
     # the radial profile at every f-th point (corners.profile_stride)

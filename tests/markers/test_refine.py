@@ -2,7 +2,9 @@ import numpy as np
 import pytest
 
 from tests.conftest import render_square
-from visloc.markers.refine import edge_offsets, refine_quads, sample_edge_profiles
+from visloc.markers.refine import NATIVE_REFINE, edge_offsets, refine_quads, sample_edge_profiles
+
+ENGINES = [False, True] if NATIVE_REFINE else [False]  # numpy, and the compiled one when built
 
 
 def test_edge_offsets_exact_for_an_area_sampled_step():
@@ -23,8 +25,9 @@ def test_sample_edge_profiles_shapes_and_outward_normals():
     assert (prof[..., 0] < prof[..., -1]).all()  # dark inside, bright outside
 
 
+@pytest.mark.parametrize("native", ENGINES)
 @pytest.mark.parametrize("blur", [0.0, 0.8, 1.5])
-def test_refine_recovers_subpixel_corners(blur, rng):
+def test_refine_recovers_subpixel_corners(blur, native, rng):
     for _ in range(5):
         c = rng.uniform(45, 55, 2)
         a = rng.uniform(0, np.pi / 2)
@@ -34,14 +37,50 @@ def test_refine_recovers_subpixel_corners(blur, rng):
         truth = truth + rng.normal(0, 1.0, (4, 2))  # perspective-like irregular quad
         img = render_square((100, 100), truth, blur=blur)
         start = truth + rng.uniform(-0.8, 0.8, (4, 2))
-        out, ok = refine_quads(img, start[None], radius=3, iterations=3)
+        out, ok = refine_quads(img, start[None], radius=3, iterations=3, native=native)
         assert ok[0]
         err = np.sqrt(((out[0] - truth) ** 2).sum(axis=1)).max()
         assert err < 0.06, err
 
 
-def test_refine_fails_cleanly_without_contrast():
+@pytest.mark.parametrize("native", ENGINES)
+def test_refine_fails_cleanly_without_contrast(native):
     img = np.full((60, 60), 128, np.uint8)
-    out, ok = refine_quads(img, np.array([[[10, 10], [40, 10], [40, 40], [10, 40.0]]]), radius=2)
+    out, ok = refine_quads(img, np.array([[[10, 10], [40, 10], [40, 40], [10, 40.0]]]), radius=2, native=native)
     assert not ok[0]
     assert np.allclose(out[0], [[10, 10], [40, 10], [40, 40], [10, 40]])
+
+
+@pytest.mark.skipif(not NATIVE_REFINE, reason="compares the compiled stage 8 with the numpy one")
+def test_compiled_and_numpy_refinement_agree_on_rendered_markers():
+    from visloc.markers import MarkerDetector
+    from visloc.markers.binarize import to_gray
+    from visloc.synth import random_scene
+
+    det = MarkerDetector("DICT_4X4_50", refine=False)
+    diffs, n_quads = [], 0
+    for seed, difficulty in ((1, "easy"), (2, "hard"), (3, "small"), (4, "easy")):
+        scene = random_scene(np.random.default_rng(seed), size=(320, 240), difficulty=difficulty)
+        gray = to_gray(scene.image)
+        quads = np.array([d.corners for d in det.detect(gray)])
+        if not len(quads):
+            continue
+        a, ok_a = refine_quads(gray, quads, radius=2, native=False)
+        b, ok_b = refine_quads(gray, quads, radius=2, native=True)
+        assert (ok_a == ok_b).all()
+        diffs.append(np.abs(a - b)[ok_a].ravel())
+        n_quads += len(quads)
+    d = np.concatenate(diffs)
+    assert n_quads >= 8
+    assert np.median(d) < 0.01 and d.max() < 0.15  # interpolation differs (module docstring)
+
+
+def test_refine_rejects_bad_input():
+    img = np.zeros((20, 20), np.uint8)
+    quad = np.array([[[5, 5], [15, 5], [15, 15], [5, 15.0]]])
+    with pytest.raises(ValueError, match="gray"):
+        refine_quads(np.zeros((20, 20, 3), np.uint8), quad)
+    with pytest.raises(ValueError, match="radius"):
+        refine_quads(img, quad, radius=0)
+    with pytest.raises(ValueError, match="count"):
+        refine_quads(img, quad, count=1)

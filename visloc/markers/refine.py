@@ -11,6 +11,11 @@ symmetric blur once the window is centred on the edge (the refinement iterates t
 A total-least-squares line through the edge points of each side, with outliers dropped, gives
 the side; the corners are the intersections of consecutive sides. Quads are refined in
 batches (one OpenCV remap per pass for all markers of a frame).
+
+The same steps compiled (``visloc.markers._refine``, built with the package) run one quad
+after another and interpolate the grey levels in double precision instead of through
+``cv2.remap`` (whose coordinates are rounded to 1/32 px and values to whole grey levels);
+without the compiled module the numpy version here runs.
 """
 
 from __future__ import annotations
@@ -23,7 +28,17 @@ from numpy.typing import NDArray
 
 from visloc.markers.corners import _NEXT, fit_lines, quad_from_lines
 
-__all__ = ["edge_offsets", "refine_quads", "sample_edge_profiles"]
+try:
+    from visloc.markers import _refine
+except ImportError:  # installed without a C compiler: the numpy version below
+    _refine = None
+
+#: Whether :func:`refine_quads` runs the compiled stage 8.
+NATIVE_REFINE = _refine is not None
+
+_END_GAP = 0.15  # fraction of each side left out at both ends (sample_edge_profiles)
+
+__all__ = ["NATIVE_REFINE", "edge_offsets", "refine_quads", "sample_edge_profiles"]
 
 
 @lru_cache(maxsize=32)
@@ -102,6 +117,7 @@ def refine_quads(
     radius: int | NDArray = 2,
     iterations: int = 2,
     count: int = 24,
+    native: bool | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """Refine the corners of dark squares on a bright surround to sub-pixel accuracy.
 
@@ -118,6 +134,9 @@ def refine_quads(
         Passes; each re-centres the profiles on the previous pass's lines.
     count : int
         Profiles per side.
+    native : bool or None
+        Run the compiled version (``True``) or the numpy one (``False``); ``None``: the
+        compiled one when it was built (:data:`NATIVE_REFINE`).
 
     Returns
     -------
@@ -126,6 +145,8 @@ def refine_quads(
     ok : ndarray (K,) bool
         False where a side had too little contrast or too few clean profiles.
     """
+    if gray.ndim != 2 or gray.dtype != np.uint8:
+        raise ValueError(f"gray must be a (H, W) uint8 image, got {gray.shape} {gray.dtype}")
     q0 = np.asarray(quads, np.float64).reshape(-1, 4, 2)
     q = q0.copy()
     k = len(q)
@@ -134,6 +155,17 @@ def refine_quads(
         return q, np.ones(0, bool)
     if (r < 1).any():
         raise ValueError(f"radius must be >= 1, got {radius}")
+    if count < 2 or iterations < 1:
+        raise ValueError(f"count must be >= 2 and iterations >= 1, got {count} and {iterations}")
+    if native is None:
+        native = NATIVE_REFINE
+    if native:
+        if _refine is None:
+            raise RuntimeError("visloc.markers._refine was not built (no C compiler at install)")
+        g = np.ascontiguousarray(gray)
+        raw, raw_ok = _refine.refine_quads(g, g.shape[0], g.shape[1], np.ascontiguousarray(q0),
+                                           np.ascontiguousarray(r, np.int64), int(iterations), int(count), _END_GAP)
+        return np.frombuffer(raw, np.float64).reshape(k, 4, 2).copy(), np.frombuffer(raw_ok, np.uint8).astype(bool)
     big = int(r.max())
     inside = (np.abs(np.arange(-big, big + 1))[None, :] <= r[:, None]).astype(np.float32)[:, None, None, :]
     kk = np.arange(k)
@@ -142,7 +174,7 @@ def refine_quads(
     ok_all = np.ones(k, bool)
     half = 2 * count  # median of the 4 * count inner (outer) end samples of each quad
     for it in range(iterations):
-        base, normals, prof = sample_edge_profiles(gray, q, big, count)
+        base, normals, prof = sample_edge_profiles(gray, q, big, count, _END_GAP)
         p_in = prof[kk, :, :, big - r]  # (K, 4, M): each quad's innermost sample
         p_out = prof[kk, :, :, big + r]
         lo = np.partition(p_in.reshape(k, -1), half, axis=1)[:, half]

@@ -5,6 +5,16 @@ import pytest
 from visloc.markers.contours import CandidateFilter, filter_candidates, find_contours
 
 
+def _native():
+    from visloc.markers.contours import NATIVE_BORDERS
+
+    return NATIVE_BORDERS
+
+
+def _engines():
+    return [False, True] if _native() else [False]
+
+
 def _ink(shape=(100, 120)):
     return np.zeros(shape, np.uint8)
 
@@ -42,7 +52,8 @@ def test_find_contours_enclosing_keeps_only_regions_with_a_hole():
     assert (c.min(axis=0) == [10, 10]).all() and (c.max(axis=0) == [39, 39]).all()
 
 
-def test_filter_keeps_squares_and_rejects_other_shapes():
+@pytest.mark.parametrize("native", _engines())
+def test_filter_keeps_squares_and_rejects_other_shapes(native):
     b = _ink((200, 300))
     cv2.fillPoly(b, [np.array([[30, 30], [80, 35], [75, 85], [28, 80]])], 255)  # quad
     cv2.circle(b, (150, 60), 25, 255, -1)  # circle
@@ -50,7 +61,7 @@ def test_filter_keeps_squares_and_rejects_other_shapes():
     cv2.rectangle(b, (30, 150), (33, 153), 255, -1)  # too small
     cv2.rectangle(b, (250, 150), (299, 199), 255, -1)  # touches the image border
     cv2.fillPoly(b, [np.array([[120, 120], [200, 120], [200, 190], [160, 150], [120, 190]])], 255)
-    cands = filter_candidates(find_contours(b), b.shape)
+    cands = filter_candidates(find_contours(b), b.shape, native=native)
     assert len(cands) == 1
     _contour, quad = cands[0]
     assert quad.shape == (4, 2)
@@ -63,12 +74,6 @@ def test_filter_perimeter_bounds_follow_the_image_size():
     cs = find_contours(b)
     assert len(filter_candidates(cs, b.shape)) == 1
     assert filter_candidates(cs, b.shape, CandidateFilter(min_perimeter_rate=0.5)) == []
-
-
-def _engines():
-    from visloc.markers.contours import NATIVE_BORDERS
-
-    return [False, True] if NATIVE_BORDERS else [False]
 
 
 def _reference(binary, lo=1, hi=10**9):
@@ -134,3 +139,25 @@ def test_the_compiled_follower_is_used_when_built():
     if not contours.NATIVE_BORDERS:
         with pytest.raises(RuntimeError, match="not built"):
             contours.enclosing_borders(_ink(), native=True)
+
+
+@pytest.mark.skipif(not _native(), reason="compares the compiled filter with the OpenCV calls")
+def test_compiled_filter_keeps_what_opencv_keeps():
+    from visloc.markers.binarize import blur, threshold, to_gray
+    from visloc.markers.contours import outer_borders
+    from visloc.synth import random_scene
+
+    kept = 0
+    for k, name in enumerate(["easy", "hard", "small", "empty", "easy"]):
+        gray = to_gray(random_scene(k, size=(320, 240), difficulty=name).image)
+        for window in (5, 9, 15):
+            b = threshold(blur(gray, 0.6), window=window, offset=7)
+            cs = [c.reshape(-1, 2) for c in outer_borders(b)[0]]  # texture too: most are rejected
+            for params in (CandidateFilter(), CandidateFilter(approx_rate=0.03, min_solidity=0.9)):
+                want = filter_candidates(cs, b.shape, params, native=False)
+                got = filter_candidates(cs, b.shape, params, native=True)
+                assert len(got) == len(want)
+                for (c1, q1), (c2, q2) in zip(got, want, strict=True):
+                    assert np.array_equal(c1, c2) and np.array_equal(q1, q2)
+                kept += len(want)
+    assert kept > 20

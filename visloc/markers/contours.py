@@ -18,12 +18,12 @@ from numpy.typing import NDArray
 _NEXT = np.array([1, 2, 3, 0])
 
 try:
-    from visloc.markers import _borders
+    from visloc.markers import _borders, _filter
 except ImportError:  # the package was installed without a C compiler: OpenCV's follower
-    _borders = None
+    _borders = _filter = None
 
-#: Whether :func:`enclosing_borders` runs the compiled border follower.
-NATIVE_BORDERS = _borders is not None
+#: Whether :func:`enclosing_borders` and :func:`filter_candidates` run compiled code.
+NATIVE_BORDERS = _borders is not None and _filter is not None
 
 __all__ = ["NATIVE_BORDERS", "CandidateFilter", "enclosing_borders", "filter_candidates", "find_contours",
            "outer_borders", "perimeter_bounds"]
@@ -144,12 +144,18 @@ def filter_candidates(
     contours: list[NDArray[np.int32]],
     image_shape: tuple[int, ...],
     params: CandidateFilter = CandidateFilter(),
+    *,
+    native: bool | None = None,
 ) -> list[tuple[NDArray[np.int32], NDArray[np.int32]]]:
     """Stage 5: keep contours that may be the outer border of a square marker.
 
     Tests, cheapest first: contour length within the perimeter bounds relative to the image
     size; area and compactness; a four-vertex convex polygon approximation (convexity);
     every side at least ``min_side``; no vertex near the image border; solidity.
+
+    ``native`` picks the compiled filter (``True``) or the OpenCV calls (``False``); ``None``
+    uses the compiled one when it was built (:data:`NATIVE_BORDERS`). Both keep the same
+    contours with the same quads.
 
     Returns
     -------
@@ -159,6 +165,19 @@ def filter_candidates(
     """
     h, w = image_shape[:2]
     lo, hi = perimeter_bounds(image_shape, params)
+    if native is None:
+        native = NATIVE_BORDERS
+    if native and contours:
+        if _filter is None:
+            raise RuntimeError("visloc.markers._filter was not built (no C compiler at install)")
+        flat = [np.asarray(c).reshape(-1, 2) for c in contours]
+        pts = np.ascontiguousarray(np.concatenate(flat), np.int32)
+        offsets = np.concatenate([[0], np.cumsum([len(c) for c in flat])]).astype(np.int64)
+        raw_kept, raw_quads = _filter.filter_quads(
+            pts, offsets, w, h, (lo, hi, params.approx_rate, params.min_side, params.min_solidity,
+                                 params.min_compactness, params.border_distance))
+        quads = np.frombuffer(raw_quads, np.int32).reshape(-1, 4, 2)
+        return [(flat[i], quads[j]) for j, i in enumerate(np.frombuffer(raw_kept, np.int64).tolist())]
     lengths = np.array(list(map(len, contours)), np.int64)
     keep = np.flatnonzero((lengths >= lo) & (lengths <= hi))
     bd = params.border_distance

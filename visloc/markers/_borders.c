@@ -1,16 +1,22 @@
 /* Stage 4 accelerator: outer borders of the ink regions that enclose a hole.
  *
- * Suzuki & Abe's border following (1985), the algorithm behind OpenCV's findContours, run on
- * a 1-px zero-padded int32 copy of the binary image: ink (non-zero) is 8-connected, holes are
- * 4-connected. Every border is traced (the marks are what keeps the raster scan exact), but
- * only the points of outer borders are stored, and only the outer borders that are the
- * parent of at least one hole border, with a length inside [min_len, max_len], are returned.
+ * What cv2.findContours(RETR_CCOMP, CHAIN_APPROX_NONE) gives for those regions, point for
+ * point, without following the thousands of texture borders around them:
  *
- * The points come out as OpenCV's CHAIN_APPROX_NONE gives them: the start pixel (the
- * region's first pixel in raster order) first, then every border pixel in tracing order.
- * The result is packed (one int32 array of points, one of offsets), so thousands of texture
- * borders cost no Python objects; OpenCV's Python binding allocates one array per border,
- * which is most of its time on textured frames.
+ * 1. the ink (non-zero) runs of each row are labelled with union-find, joining the runs of
+ *    the row above that touch them, diagonally too (8-connected); a label is its region's
+ *    first run in raster order, so it also names the region's topmost-leftmost pixel;
+ * 2. a region of R runs with A touching pairs of runs (in consecutive rows) has A - R + 1
+ *    holes (4-connected white components it encloses): the run-length form of its Euler
+ *    number, 1 - holes = R - A;
+ * 3. each region with a hole has its outer border followed from its first pixel as Suzuki &
+ *    Abe's algorithm (OpenCV's) does: clockwise from the left neighbour for the second
+ *    point, then counter-clockwise around each border pixel from the one after the previous,
+ *    until the first two points come round again. Borders longer than max_len are dropped
+ *    as soon as they are.
+ *
+ * The borders come out in OpenCV's order (last found first), packed: one int32 array of
+ * points and one of offsets, so no Python object is made per border.
  *
  * enclosing_borders(binary, height, width, min_len, max_len)
  *     -> (points: bytes of int32 (x, y) pairs, offsets: bytes of int64 (K + 1), n_outer: int)
@@ -22,167 +28,154 @@
 #include <string.h>
 
 typedef struct {
-    int64_t *v;
-    size_t n, cap;
-} vec64;
+    int32_t *x0, *x1, *parent, *pairs;
+    int64_t n, cap;
+} runs;
 
-static int push64(vec64 *a, int64_t x) {
-    if (a->n == a->cap) {
-        size_t cap = a->cap ? 2 * a->cap : 1024;
-        int64_t *v = (int64_t *)realloc(a->v, cap * sizeof(int64_t));
+static int add_run(runs *r, int32_t x0, int32_t x1) {
+    if (r->n == r->cap) {
+        int64_t cap = r->cap ? 2 * r->cap : 65536;
+        int32_t **arrays[4] = {&r->x0, &r->x1, &r->parent, &r->pairs};
+        for (int k = 0; k < 4; k++) {
+            int32_t *a = (int32_t *)realloc(*arrays[k], (size_t)cap * sizeof(int32_t));
+            if (!a) return -1;
+            *arrays[k] = a;
+        }
+        r->cap = cap;
+    }
+    r->x0[r->n] = x0;
+    r->x1[r->n] = x1;
+    r->parent[r->n] = (int32_t)r->n;
+    r->pairs[r->n] = 0;
+    r->n++;
+    return 0;
+}
+
+static int32_t find(int32_t *parent, int32_t i) {
+    while (parent[i] != i) {
+        parent[i] = parent[parent[i]]; /* path halving */
+        i = parent[i];
+    }
+    return i;
+}
+
+typedef struct {
+    int32_t *v;
+    int64_t n, cap;
+} vec32;
+
+static int push_point(vec32 *a, int32_t x, int32_t y) {
+    if (a->n + 2 > a->cap) {
+        int64_t cap = a->cap ? 2 * a->cap : 8192;
+        int32_t *v = (int32_t *)realloc(a->v, (size_t)cap * sizeof(int32_t));
         if (!v) return -1;
         a->v = v;
         a->cap = cap;
     }
     a->v[a->n++] = x;
+    a->v[a->n++] = y;
     return 0;
 }
 
-typedef struct {
-    int32_t *v;
-    size_t n, cap;
-} vec32;
+/* Chain-code directions as OpenCV numbers them: 0 right, then counter-clockwise on screen. */
+static const int DX[8] = {1, 1, 0, -1, -1, -1, 0, 1};
+static const int DY[8] = {0, -1, -1, -1, 0, 1, 1, 1};
 
-static int reserve32(vec32 *a, size_t extra) {
-    if (a->n + extra > a->cap) {
-        size_t cap = a->cap ? a->cap : 4096;
-        while (cap < a->n + extra) cap *= 2;
-        int32_t *v = (int32_t *)realloc(a->v, cap * sizeof(int32_t));
-        if (!v) return -1;
-        a->v = v;
-        a->cap = cap;
-    }
-    return 0;
+static inline int ink_at(const uint8_t *g, int64_t w, int64_t h, int64_t x, int64_t y) {
+    return x >= 0 && y >= 0 && x < w && y < h && g[y * w + x] != 0;
 }
 
-/* Per border (index = NBD - 2): parent NBD, outer flag, first point and point count of
- * outer borders (points of hole borders are not kept), and whether a hole has it as parent. */
-typedef struct {
-    vec64 parent, outer, start, count, holes;
-} borders;
-
-/* Neighbour offsets in OpenCV's chain-code order: 0 right, then counter-clockwise on screen
- * (1 up-right, 2 up, 3 up-left, 4 left, 5 down-left, 6 down, 7 down-right), twice over so
- * that a search may run past 7 without a modulo. */
-static void deltas(int64_t step, int64_t d[16], int dx[8], int dy[8]) {
-    static const int cx[8] = {1, 1, 0, -1, -1, -1, 0, 1};
-    static const int cy[8] = {0, -1, -1, -1, 0, 1, 1, 1};
-    for (int k = 0; k < 8; k++) {
-        dx[k] = cx[k];
-        dy[k] = cy[k];
-        d[k] = d[k + 8] = cy[k] * step + cx[k];
-    }
-}
-
-/* Follow one border from the pixel at index p0 (x0, y0 in padded coordinates), marking it
- * with nbd as Suzuki & Abe's step 3 does; store its points when `pts` is not NULL.
- * Returns the number of points, -1 on memory failure. */
-static int64_t follow(int32_t *f, int64_t p0, int x0, int y0, int is_hole, int32_t nbd,
-                      const int64_t d[16], const int dx[8], const int dy[8], vec32 *pts) {
-    int s, s_end;
-    int64_t p1, p3, p4;
-    int64_t n = 0;
-    int x = x0, y = y0;
-    /* 3.1: clockwise from the neighbour that started the border (left of an outer border's
-     * start, right of a hole border's) for the first non-zero neighbour */
-    s_end = s = is_hole ? 0 : 4;
-    do {
+/* The outer border from the region's first pixel (x0, y0), appended to pts; its length, or
+ * -1 when it passed max_len (nothing kept), -2 on memory failure. */
+static int64_t follow(const uint8_t *g, int64_t w, int64_t h, int64_t x0, int64_t y0, int64_t max_len, vec32 *pts) {
+    int64_t start = pts->n;
+    int s = 4, s_end = 4;
+    int64_t x1 = 0, y1 = 0;
+    do { /* clockwise from the left neighbour (0, as the region starts there) */
         s = (s - 1) & 7;
-        p1 = p0 + d[s];
-    } while (f[p1] == 0 && s != s_end);
+        x1 = x0 + DX[s];
+        y1 = y0 + DY[s];
+    } while (!ink_at(g, w, h, x1, y1) && s != s_end);
     if (s == s_end) { /* an isolated pixel */
-        f[p0] = -nbd;
-        if (pts) {
-            if (reserve32(pts, 2)) return -1;
-            pts->v[pts->n++] = x0 - 1;
-            pts->v[pts->n++] = y0 - 1;
-        }
+        if (push_point(pts, (int32_t)x0, (int32_t)y0)) return -2;
         return 1;
     }
-    p3 = p0;
+    int64_t x3 = x0, y3 = y0, n = 0;
     for (;;) {
-        /* 3.3: counter-clockwise around p3 from the neighbour after the previous pixel */
-        s_end = s;
-        for (;;) {
-            p4 = p3 + d[++s];
-            if (f[p4] != 0) break;
+        int64_t x4, y4;
+        for (;;) { /* counter-clockwise from the neighbour after the previous pixel */
+            s = (s + 1) & 7;
+            x4 = x3 + DX[s];
+            y4 = y3 + DY[s];
+            if (ink_at(g, w, h, x4, y4)) break;
         }
-        s &= 7;
-        /* 3.4: the right neighbour of p3 was examined and is 0 -> negative mark */
-        if ((unsigned)(s - 1) < (unsigned)s_end)
-            f[p3] = -nbd;
-        else if (f[p3] == 1)
-            f[p3] = nbd;
-        if (pts) {
-            if (reserve32(pts, 2)) return -1;
-            pts->v[pts->n++] = x - 1;
-            pts->v[pts->n++] = y - 1;
+        if (n == max_len) { /* one more point than allowed */
+            pts->n = start;
+            return -1;
         }
+        if (push_point(pts, (int32_t)x3, (int32_t)y3)) return -2;
         n++;
-        x += dx[s];
-        y += dy[s];
-        /* 3.5: back at the start, about to repeat the first step: done */
-        if (p4 == p0 && p3 == p1) break;
-        p3 = p4;
+        if (x4 == x0 && y4 == y0 && x3 == x1 && y3 == y1) break;
+        x3 = x4;
+        y3 = y4;
         s = (s + 4) & 7;
     }
     return n;
 }
 
-/* The padded int32 image is kept between calls (page faults on a fresh 1 MB buffer cost
- * more than the scan); taken and given back with the GIL held, so concurrent calls from other
- * threads simply allocate their own. */
-static int32_t *cache = NULL;
-static size_t cache_size = 0;
+/* The first x >= e in row[.. w) whose pixel is not of the run's colour (w if none): eight
+ * pixels at a time (a zero byte found with the usual "has a zero byte" bit trick). */
+static inline int64_t run_end(const uint8_t *row, int64_t e, int64_t w, int ink) {
+#if (defined(__GNUC__) || defined(__clang__)) && defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+    const uint64_t ones = 0x0101010101010101ULL, highs = 0x8080808080808080ULL;
+    while (e + 8 <= w) {
+        uint64_t v;
+        memcpy(&v, row + e, 8);
+        uint64_t t = ink ? (v - ones) & ~v & highs : v;
+        if (t) return e + (__builtin_ctzll(t) >> 3); /* little-endian: the lowest byte first */
+        e += 8;
+    }
+#endif
+    while (e < w && (row[e] != 0) == ink) e++;
+    return e;
+}
 
-/* The raster scan of Suzuki & Abe's algorithm 1 over the padded image f (h x w inside a
- * frame of zeros, row stride `step`). Returns -1 on memory failure. */
-static int scan(int32_t *f, Py_ssize_t h, Py_ssize_t w, int64_t step, borders *b, vec32 *pts) {
-    int64_t d[16];
-    int dx[8], dy[8];
-    deltas(step, d, dx, dy);
-    int32_t nbd = 1;
-    for (int y = 1; y <= h; y++) {
-        int32_t lnbd = 1; /* the frame: a hole border (NBD 1) */
-        int32_t *row = f + y * step;
-        int x = 1;
-        for (;;) {
-            while (row[x] == 0 && x <= w) x++; /* the column after the last is 0 */
-            if (x > w) break;
-            /* x starts a run of ink (its left neighbour is 0); walk it to its end */
-            for (;;) {
-                int32_t v = row[x];
-                int is_hole;
-                if (v == 1 && row[x - 1] == 0)
-                    is_hole = 0;
-                else if (v >= 1 && row[x + 1] == 0) {
-                    is_hole = 1;
-                    if (v > 1) lnbd = v;
-                } else {
-                    if (v != 1) lnbd = v < 0 ? -v : v;
-                    if (row[++x] == 0) break;
-                    continue;
+/* Ink runs of every row (row_start[y] .. row_start[y + 1]) labelled into regions, with the
+ * number of runs of the row above each one touches. */
+static int label(const uint8_t *g, int64_t h, int64_t w, runs *r, int64_t *row_start) {
+    for (int64_t y = 0; y < h; y++) {
+        const uint8_t *row = g + y * w;
+        row_start[y] = r->n;
+        int64_t x = row[0] != 0 ? 0 : run_end(row, 1, w, 0);
+        while (x < w) {
+            int64_t e = run_end(row, x + 1, w, 1);
+            if (add_run(r, (int32_t)x, (int32_t)(e - 1))) return -1;
+            x = e < w ? run_end(row, e + 1, w, 0) : w;
+        }
+        if (y == 0) continue;
+        /* join with the row above; both lists are sorted */
+        int64_t j = row_start[y - 1], j_end = row_start[y];
+        for (int64_t i = row_start[y]; i < r->n; i++) {
+            int32_t lo = r->x0[i] - 1, hi = r->x1[i] + 1; /* 8-connected: diagonals touch */
+            while (j < j_end && r->x1[j] < lo) j++;
+            int32_t root = (int32_t)i;
+            for (int64_t k = j; k < j_end && r->x0[k] <= hi; k++) {
+                r->pairs[i]++;
+                int32_t rk = find(r->parent, (int32_t)k);
+                if (root == i) { /* the first run it touches: join its region */
+                    r->parent[i] = root = rk;
+                } else if (rk != root) { /* two regions meet: the earlier root stays */
+                    if (rk < root) {
+                        r->parent[root] = rk;
+                        root = rk;
+                    } else {
+                        r->parent[rk] = root;
+                    }
                 }
-                nbd++;
-                /* step 2: the parent from the border met last (lnbd) */
-                int64_t parent = 1; /* the frame */
-                if (lnbd >= 2) {
-                    int same = b->outer.v[lnbd - 2] == !is_hole;
-                    parent = same ? b->parent.v[lnbd - 2] : lnbd;
-                }
-                int64_t start = (int64_t)pts->n / 2;
-                int64_t n = follow(f, (int64_t)y * step + x, x, y, is_hole, nbd, d, dx, dy, is_hole ? NULL : pts);
-                if (n < 0 || push64(&b->parent, parent) || push64(&b->outer, !is_hole) ||
-                    push64(&b->start, is_hole ? -1 : start) || push64(&b->count, n) || push64(&b->holes, 0))
-                    return -1;
-                if (is_hole && parent >= 2) b->holes.v[parent - 2] = 1;
-                /* step 4 */
-                v = row[x];
-                if (v != 1) lnbd = v < 0 ? -v : v;
-                if (row[++x] == 0) break;
             }
         }
     }
+    row_start[h] = r->n;
     return 0;
 }
 
@@ -197,82 +190,68 @@ static PyObject *enclosing_borders(PyObject *self, PyObject *args) {
                      buf.len);
         return NULL;
     }
-    const int64_t step = (int64_t)w + 2;
-    const size_t size = (size_t)(h + 2) * (size_t)step;
-    int32_t *f = NULL;
-    if (cache && cache_size >= size) {
-        f = cache;
-        cache = NULL;
-    } else {
-        f = (int32_t *)malloc(size * sizeof(int32_t));
-    }
-    borders b;
-    memset(&b, 0, sizeof(b));
+    const uint8_t *g = (const uint8_t *)buf.buf;
+    runs r = {0};
     vec32 pts = {0};
-    vec64 sel = {0};
-    int failed = f == NULL;
-    Py_ssize_t n_outer = 0;
+    int64_t *row_start = (int64_t *)malloc((size_t)(h + 1) * sizeof(int64_t));
+    int64_t *holes = NULL;   /* per root: pairs - runs */
+    int64_t *borders = NULL; /* per kept border: first point index */
+    int64_t n_borders = 0, n_outer = 0;
+    int failed = row_start == NULL;
+    Py_BEGIN_ALLOW_THREADS
+    if (!failed) failed = label(g, h, w, &r, row_start) != 0;
     if (!failed) {
-        const uint8_t *src = (const uint8_t *)buf.buf;
-        Py_BEGIN_ALLOW_THREADS
-        memset(f, 0, (size_t)step * sizeof(int32_t));
-        memset(f + (h + 1) * step, 0, (size_t)step * sizeof(int32_t));
-        for (Py_ssize_t r = 0; r < h; r++) {
-            int32_t *row = f + (r + 1) * step;
-            const uint8_t *s = src + r * w;
-            row[0] = row[w + 1] = 0;
-            for (Py_ssize_t c = 0; c < w; c++) row[c + 1] = s[c] != 0;
-        }
-        failed = scan(f, h, w, step, &b, &pts) != 0;
-        for (size_t k = 0; !failed && k < b.outer.n; k++) {
-            if (!b.outer.v[k]) continue;
-            n_outer++;
-            if (b.holes.v[k] && b.count.v[k] >= min_len && b.count.v[k] <= max_len && push64(&sel, (int64_t)k))
-                failed = 1;
-        }
-        Py_END_ALLOW_THREADS
+        holes = (int64_t *)calloc((size_t)r.n + 1, sizeof(int64_t));
+        borders = (int64_t *)malloc((size_t)(r.n + 1) * sizeof(int64_t));
+        failed = !holes || !borders;
     }
+    if (!failed) {
+        for (int64_t i = 0; i < r.n; i++) {
+            int32_t root = find(r.parent, (int32_t)i);
+            holes[root] += r.pairs[i] - 1;
+            n_outer += root == i;
+        }
+        /* the outer borders of the regions with a hole (pairs - runs + 1 > 0), last found first */
+        int64_t y = h - 1;
+        for (int64_t i = r.n - 1; i >= 0 && !failed; i--) {
+            while (i < row_start[y]) y--;
+            if (r.parent[i] != i || holes[i] + 1 <= 0) continue;
+            int64_t first = pts.n / 2;
+            int64_t n = follow(g, w, h, r.x0[i], y, max_len, &pts);
+            if (n == -2) failed = 1;
+            if (n < min_len) { /* too short, or too long (-1) */
+                pts.n = 2 * first;
+                continue;
+            }
+            borders[n_borders++] = first;
+        }
+    }
+    Py_END_ALLOW_THREADS
     PyBuffer_Release(&buf);
-    if (f && !cache) {
-        cache = f;
-        cache_size = size;
-    } else {
-        free(f);
-    }
     PyObject *result = NULL;
     if (failed) {
         PyErr_NoMemory();
     } else {
-        int64_t total = 0;
-        for (size_t i = 0; i < sel.n; i++) total += b.count.v[sel.v[i]];
-        PyObject *points = PyBytes_FromStringAndSize(NULL, (Py_ssize_t)(total * 2 * sizeof(int32_t)));
-        PyObject *offsets = PyBytes_FromStringAndSize(NULL, (Py_ssize_t)((sel.n + 1) * sizeof(int64_t)));
+        PyObject *points = PyBytes_FromStringAndSize((const char *)pts.v, (Py_ssize_t)(pts.n * sizeof(int32_t)));
+        PyObject *offsets = PyBytes_FromStringAndSize(NULL, (Py_ssize_t)((n_borders + 1) * sizeof(int64_t)));
         if (points && offsets) {
-            int32_t *po = (int32_t *)PyBytes_AS_STRING(points);
-            int64_t *oo = (int64_t *)PyBytes_AS_STRING(offsets);
-            int64_t at = 0;
-            /* OpenCV lists the borders last found first */
-            for (size_t i = 0; i < sel.n; i++) {
-                int64_t k = sel.v[sel.n - 1 - i];
-                int64_t cnt = b.count.v[k];
-                oo[i] = at;
-                memcpy(po + 2 * at, pts.v + 2 * b.start.v[k], (size_t)cnt * 2 * sizeof(int32_t));
-                at += cnt;
-            }
-            oo[sel.n] = at;
-            result = Py_BuildValue("(NNn)", points, offsets, n_outer);
+            int64_t *o = (int64_t *)PyBytes_AS_STRING(offsets);
+            for (int64_t k = 0; k < n_borders; k++) o[k] = borders[k];
+            o[n_borders] = pts.n / 2;
+            result = Py_BuildValue("(NNn)", points, offsets, (Py_ssize_t)n_outer);
         } else {
             Py_XDECREF(points);
             Py_XDECREF(offsets);
         }
     }
+    free(row_start);
+    free(holes);
+    free(borders);
     free(pts.v);
-    free(sel.v);
-    free(b.parent.v);
-    free(b.outer.v);
-    free(b.start.v);
-    free(b.count.v);
-    free(b.holes.v);
+    free(r.x0);
+    free(r.x1);
+    free(r.parent);
+    free(r.pairs);
     return result;
 }
 

@@ -1,9 +1,21 @@
 """Stages 4-5 of the marker pipeline: contour following and candidate filtering.
 
 Report Appendix G: "From the binary image all the contours are determined ... Then all closed
-contours are determined using a line following method" (Figure G.1.C). OpenCV's border
-follower (Suzuki-Abe) is used; only *outer* borders of ink regions are kept, so the inner
-border of a marker's black frame never becomes a second candidate.
+contours are determined using a line following method" (Figure G.1.C). Only *outer* borders of
+ink regions are kept, so the inner border of a marker's black frame never becomes a second
+candidate, and only those of regions that enclose a hole: a marker's frame encloses its cells.
+
+:func:`outer_borders` is OpenCV's border follower (Suzuki-Abe) and gives every border, for
+the pictures of ``--explain``. The detector asks only for the borders it can use
+(:func:`enclosing_borders`). Compiled code (``visloc.markers._borders``, built with the
+package) finds them without following the thousands of texture borders around them: it labels
+the ink runs of each row, tells the regions with a hole by their Euler number (runs and
+touching pairs of runs), and follows only those regions' outer borders, as Suzuki-Abe (and
+OpenCV) do. It returns them packed instead of one Python array per border; on textured frames
+most of ``cv2.findContours``'s time goes into such arrays for borders that are thrown away.
+Without the compiled module ``cv2.findContours`` is used; both give the same borders, point for
+point. The candidate filter is compiled too (``visloc.markers._filter``: the same tests, with
+Douglas-Peucker as ``cv2.approxPolyDP`` computes it), with the OpenCV calls as the fallback.
 """
 
 from __future__ import annotations

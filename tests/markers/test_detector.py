@@ -225,3 +225,42 @@ def test_constructor_errors():
         MarkerDetector("DICT_NOPE")
     with pytest.raises(ValueError, match="scale"):
         MarkerDetector("DICT_4X4_50", passes=[(0.5, 9)])
+
+
+def _same(a, b):
+    return [d.id for d in a] == [d.id for d in b] and all(np.array_equal(x.corners, y.corners) for x, y in zip(a, b))
+
+
+def test_the_worker_thread_changes_no_detection(detector, monkeypatch):
+    import visloc.markers.detector as det_mod
+
+    images = [random_scene(np.random.default_rng(s), size=(320, 240), difficulty=d).image
+              for s, d in ((1, "easy"), (2, "hard"), (3, "small"), (4, "empty"))]
+    monkeypatch.setattr(det_mod, "_THREAD_MAX_PIXELS", 0)  # every pass on the calling thread
+    alone = [detector.detect(im) for im in images]
+    monkeypatch.setattr(det_mod, "_THREAD_MAX_PIXELS", 10**9)  # later passes on the worker
+    threaded = [detector.detect(im) for im in images]
+    assert sum(map(len, alone)) > 5
+    assert all(_same(a, b) for a, b in zip(alone, threaded, strict=True))
+
+
+def _detect_in_child(queue):
+    image = random_scene(np.random.default_rng(1), size=(320, 240), difficulty="easy").image
+    queue.put([d.id for d in MarkerDetector("DICT_4X4_50").detect(image)])
+
+
+def test_detection_works_in_a_forked_child(detector):
+    import multiprocessing
+
+    image = random_scene(np.random.default_rng(1), size=(320, 240), difficulty="easy").image
+    ids = [d.id for d in detector.detect(image)]  # the parent's worker thread exists now
+    ctx = multiprocessing.get_context("fork")
+    queue = ctx.Queue()
+    child = ctx.Process(target=_detect_in_child, args=(queue,))
+    child.start()
+    try:
+        assert queue.get(timeout=20) == ids and ids
+    finally:
+        child.join(timeout=10)
+        if child.is_alive():
+            child.kill()

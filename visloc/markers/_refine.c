@@ -43,6 +43,24 @@ static double sample(const image *im, double x, double y) {
     return (1 - ay) * ((1 - ax) * r0[x0] + ax * r0[x1]) + ay * ((1 - ax) * r1[x0] + ax * r1[x1]);
 }
 
+/* Bilinear grey levels at n points (x0 + o dx, y0 + o dy), o = 0 .. n-1, into out: without
+ * the border clamps when all of them are at least a pixel inside the image. */
+static void sample_line(const image *im, double x0, double y0, double dx, double dy, int64_t n, double *out) {
+    double xe = x0 + (double)(n - 1) * dx, ye = y0 + (double)(n - 1) * dy;
+    if (x0 < 0 || xe < 0 || y0 < 0 || ye < 0 || x0 >= im->w - 1 || xe >= im->w - 1 || y0 >= im->h - 1 ||
+        ye >= im->h - 1) {
+        for (int64_t o = 0; o < n; o++) out[o] = sample(im, x0 + (double)o * dx, y0 + (double)o * dy);
+        return;
+    }
+    for (int64_t o = 0; o < n; o++) {
+        double x = x0 + (double)o * dx, y = y0 + (double)o * dy;
+        int64_t xi = (int64_t)x, yi = (int64_t)y; /* floor: both are >= 0 here */
+        double ax = x - (double)xi, ay = y - (double)yi;
+        const uint8_t *r0 = im->g + yi * im->w + xi, *r1 = r0 + im->w;
+        out[o] = (1 - ay) * ((1 - ax) * r0[0] + ax * r0[1]) + ay * ((1 - ax) * r1[0] + ax * r1[1]);
+    }
+}
+
 /* The element of rank k (0-based) of v[0..n-1] (v is reordered). */
 static double select_rank(double *v, int64_t n, int64_t k) {
     int64_t lo = 0, hi = n - 1;
@@ -117,7 +135,7 @@ static int refine_one(const image *im, double q[8], int64_t r, int iterations, i
                 double t = count > 1 ? end_gap + (1 - 2 * end_gap) * (double)m / (double)(count - 1) : end_gap;
                 double bx = a[0] + t * dx, by = a[1] + t * dy;
                 double *pr = prof + (s * count + m) * width;
-                for (int64_t o = -r; o <= r; o++) pr[o + r] = sample(im, bx + o * nx, by + o * ny);
+                sample_line(im, bx - (double)r * nx, by - (double)r * ny, nx, ny, width, pr);
                 p_in[s * count + m] = pr[0];
                 p_out[s * count + m] = pr[width - 1];
                 ex[s * count + m] = bx; /* profile centre, moved to the edge below */

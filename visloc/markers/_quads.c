@@ -20,6 +20,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "_lines.h"
+
 static double round9(double x) { return rint(x * 1e9) / 1e9; }
 
 /* Indices (4, ascending, into the strided profile) of the corners from the radial profile
@@ -111,37 +113,15 @@ static int radial_peaks(const double *d, int64_t nf, double *avail, int64_t *cho
     return 1;
 }
 
-/* Total-least-squares line a x + b y = c (unit normal) through the points idx of side s. */
-static void fit_line(const int32_t *p, int64_t n, int64_t a0, int64_t count, double line[3]) {
-    double mx = 0, my = 0;
-    for (int64_t o = 0; o < count; o++) {
-        const int32_t *q = p + 2 * ((a0 + o) % n);
-        mx += q[0];
-        my += q[1];
-    }
-    mx /= (double)count;
-    my /= (double)count;
-    double sxx = 0, syy = 0, sxy = 0;
-    for (int64_t o = 0; o < count; o++) {
-        const int32_t *q = p + 2 * ((a0 + o) % n);
-        double qx = q[0] - mx, qy = q[1] - my;
-        sxx += qx * qx;
-        syy += qy * qy;
-        sxy += qx * qy;
-    }
-    double theta = 0.5 * atan2(2 * sxy, sxx - syy); /* direction of the major axis */
-    line[0] = -sin(theta);
-    line[1] = cos(theta);
-    line[2] = line[0] * mx + line[1] * my;
-}
-
-/* One contour of n points p: corners (4, 2) clockwise, 1 when found. */
+/* One contour of n points p: corners (4, 2) clockwise, 1 when found. `work` holds 5 nf + 2 n
+ * doubles. */
 static int fit_one(const int32_t *p, int64_t n, const double *hint, double sigma, double padding, double *work,
                    double corners[8]) {
     int64_t f = n / 128 > 1 ? n / 128 : 1;
     int64_t nf = (n + f - 1) / f;
     double *dist = work, *sm = work + nf, *avail = work + 2 * nf, *valley = work + 3 * nf;
     int64_t *scratch = (int64_t *)(work + 4 * nf);
+    double *side_x = work + 5 * nf, *side_y = work + 5 * nf + n; /* n each */
     double cx = 0, cy = 0;
     for (int64_t j = 0; j < nf; j++) {
         cx += p[2 * j * f];
@@ -201,7 +181,12 @@ static int fit_one(const int32_t *p, int64_t n, const double *hint, double sigma
         int64_t pad = (int64_t)(padding * (double)length) + 1;
         int64_t size = length - 2 * pad + 1;
         if (size < 2) return 0;
-        fit_line(p, n, a + pad, size, lines[side]);
+        for (int64_t o = 0; o < size; o++) {
+            const int32_t *q = p + 2 * ((a + pad + o) % n);
+            side_x[o] = q[0];
+            side_y[o] = q[1];
+        }
+        tls_line(side_x, side_y, NULL, size, lines[side]);
         double *l = lines[side];
         if (l[0] * cx + l[1] * cy > l[2]) { /* normals outward, then half a pixel out to the ink edge */
             l[0] = -l[0];
@@ -210,14 +195,7 @@ static int fit_one(const int32_t *p, int64_t n, const double *hint, double sigma
         }
         l[2] += 0.5;
     }
-    for (int k = 0; k < 4; k++) { /* corner k: sides k-1 and k */
-        const double *l1 = lines[(k + 3) % 4], *l2 = lines[k];
-        double det = l1[0] * l2[1] - l1[1] * l2[0];
-        if (fabs(det) < 1e-12) return 0;
-        corners[2 * k] = (l1[2] * l2[1] - l1[1] * l2[2]) / det;
-        corners[2 * k + 1] = (l1[0] * l2[2] - l1[2] * l2[0]) / det;
-        if (!isfinite(corners[2 * k]) || !isfinite(corners[2 * k + 1])) return 0;
-    }
+    if (!quad_corners((const double(*)[3])lines, corners)) return 0;
     double area2 = 0;
     for (int k = 0; k < 4; k++) {
         int m = (k + 1) % 4;
@@ -265,7 +243,7 @@ static PyObject *fit_quads(PyObject *self, PyObject *args) {
         int64_t n_max = 0;
         for (Py_ssize_t i = 0; i < k; i++)
             if (o[i + 1] - o[i] > n_max) n_max = o[i + 1] - o[i];
-        double *work = (double *)malloc((size_t)(5 * (n_max + 1)) * sizeof(double));
+        double *work = (double *)malloc((size_t)(7 * (n_max + 1)) * sizeof(double));
         PyObject *corners = PyBytes_FromStringAndSize(NULL, k * 8 * (Py_ssize_t)sizeof(double));
         PyObject *ok = PyBytes_FromStringAndSize(NULL, k);
         if (work && corners && ok) {

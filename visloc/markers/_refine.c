@@ -21,6 +21,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "_lines.h"
+
 typedef struct {
     const uint8_t *g;
     int64_t h, w;
@@ -88,30 +90,6 @@ static double select_rank(double *v, int64_t n, int64_t k) {
     return v[k];
 }
 
-/* Weighted total-least-squares line a x + b y = c through m points (px, py, weights w). */
-static void fit_line(const double *px, const double *py, const double *w, int64_t m, double line[3]) {
-    double sw = 0, mx = 0, my = 0;
-    for (int64_t i = 0; i < m; i++) {
-        sw += w[i];
-        mx += w[i] * px[i];
-        my += w[i] * py[i];
-    }
-    if (sw < 1e-12) sw = 1e-12;
-    mx /= sw;
-    my /= sw;
-    double sxx = 0, syy = 0, sxy = 0;
-    for (int64_t i = 0; i < m; i++) {
-        double qx = px[i] - mx, qy = py[i] - my;
-        sxx += w[i] * qx * qx;
-        syy += w[i] * qy * qy;
-        sxy += w[i] * qx * qy;
-    }
-    double theta = 0.5 * atan2(2 * sxy, sxx - syy);
-    line[0] = -sin(theta);
-    line[1] = cos(theta);
-    line[2] = line[0] * mx + line[1] * my;
-}
-
 /* Refine one quad q (4, 2) in place; 1 on success (q is left as given otherwise). `work`
  * holds 4 * count * (7 + 2 r + 1) doubles. */
 static int refine_one(const image *im, double q[8], int64_t r, int iterations, int64_t count, double end_gap,
@@ -167,7 +145,7 @@ static int refine_one(const image *im, double q[8], int64_t r, int iterations, i
                 py[m] += e * normal[s][1];
             }
             if (n_good < 3) return 0;
-            fit_line(px, py, w, count, lines[s]);
+            tls_line(px, py, w, count, lines[s]);
             if (it == iterations - 1) { /* drop the outliers of the first fit and fit again */
                 double *l = lines[s], sw = 0, ss = 0;
                 for (int64_t m = 0; m < count; m++) {
@@ -182,22 +160,16 @@ static int refine_one(const image *im, double q[8], int64_t r, int iterations, i
                     w2[m] = w[m] * (res[m] < 2.5 * rms + 0.05);
                     sw2 += w2[m];
                 }
-                fit_line(px, py, sw2 >= 3 ? w2 : w, count, lines[s]);
+                tls_line(px, py, sw2 >= 3 ? w2 : w, count, lines[s]);
             }
             if (lines[s][0] * normal[s][0] + lines[s][1] * normal[s][1] < 0)
                 for (int c = 0; c < 3; c++) lines[s][c] = -lines[s][c];
         }
         double next[8], move = 0;
-        for (int k = 0; k < 4; k++) { /* corner k: sides k-1 and k */
-            const double *l1 = lines[(k + 3) % 4], *l2 = lines[k];
-            double det = l1[0] * l2[1] - l1[1] * l2[0];
-            if (fabs(det) < 1e-12) return 0;
-            next[2 * k] = (l1[2] * l2[1] - l1[1] * l2[2]) / det;
-            next[2 * k + 1] = (l1[0] * l2[2] - l1[2] * l2[0]) / det;
-            for (int c = 0; c < 2; c++) {
-                double d = fabs(next[2 * k + c] - cur[2 * k + c]);
-                if (!(d <= move)) move = d; /* NaN propagates */
-            }
+        if (!quad_corners((const double(*)[3])lines, next)) return 0;
+        for (int c = 0; c < 8; c++) {
+            double d = fabs(next[c] - cur[c]);
+            if (!(d <= move)) move = d; /* NaN propagates */
         }
         if (!(move <= 2.0 * (double)r + 1.0)) return 0;
         memcpy(cur, next, sizeof(cur));

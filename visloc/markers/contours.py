@@ -27,6 +27,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from visloc.markers._compiled import use_compiled
+
 _NEXT = np.array([1, 2, 3, 0])
 
 try:
@@ -72,11 +74,7 @@ def enclosing_borders(binary: NDArray[np.uint8], min_len: int = 1, max_len: int 
     if binary.ndim != 2 or binary.dtype != np.uint8:
         raise ValueError(f"binary must be a (H, W) uint8 image, got {binary.shape} {binary.dtype}")
     hi = np.iinfo(np.int64).max if max_len is None else int(max_len)
-    if native is None:
-        native = NATIVE_BORDERS
-    if native:
-        if _borders is None:
-            raise RuntimeError("visloc.markers._borders was not built (no C compiler at install)")
+    if use_compiled(native, _borders, "_borders"):
         b = np.ascontiguousarray(binary)
         raw, raw_offsets, _ = _borders.enclosing_borders(b, b.shape[0], b.shape[1], int(min_len), hi)
         pts = np.frombuffer(raw, np.int32).reshape(-1, 2)
@@ -177,11 +175,7 @@ def filter_candidates(
     """
     h, w = image_shape[:2]
     lo, hi = perimeter_bounds(image_shape, params)
-    if native is None:
-        native = NATIVE_BORDERS
-    if native and contours:
-        if _filter is None:
-            raise RuntimeError("visloc.markers._filter was not built (no C compiler at install)")
+    if use_compiled(native, _filter, "_filter") and contours:
         flat = [np.asarray(c).reshape(-1, 2) for c in contours]
         pts = np.ascontiguousarray(np.concatenate(flat), np.int32)
         offsets = np.concatenate([[0], np.cumsum([len(c) for c in flat])]).astype(np.int64)

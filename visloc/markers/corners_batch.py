@@ -29,6 +29,7 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import NDArray
 
+from visloc.markers._compiled import use_compiled
 from visloc.markers.corners import _NEXT, RadialSplit, fit_lines, profile_stride, quad_from_lines
 
 try:
@@ -168,12 +169,8 @@ def fit_quads(
         return np.zeros((0, 4, 2)), np.zeros(0, bool), [] if splits else None
     if sigma is not None and not sigma > 0:
         raise ValueError(f"sigma must be > 0 (or None), got {sigma}")
-    if native is None:
-        native = NATIVE_QUADS
-    if not native:
+    if not use_compiled(native, _quads, "_quads"):
         return _fit_quads_numpy(contours, hints, sigma, padding, splits)
-    if _quads is None:
-        raise RuntimeError("visloc.markers._quads was not built (no C compiler at install)")
     lengths = np.array([len(c) for c in contours], np.int64)
     if (lengths < 4).any():
         raise ValueError(f"contours need at least 4 points each, got {int(lengths.min())}")

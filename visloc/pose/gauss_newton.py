@@ -7,6 +7,10 @@ several starts refined at once (vectorised over the starts).
 
 Residuals are in pixels of the undistorted image: ``f * (projected - observed)`` with the
 observed points in normalized image coordinates and ``f = (fx, fy)``.
+
+:func:`levenberg_marquardt` runs compiled (``visloc.pose._lm``, built with the package: the
+same steps without numpy's per-call cost, which dominates for a few dozen points) when it was
+built, and in numpy otherwise.
 """
 
 from __future__ import annotations
@@ -31,6 +35,14 @@ MAX_ITER_OTHER = 6
 ATOL = 1e-20
 
 _EYE6 = np.eye(6)
+
+try:
+    from visloc.pose import _lm
+except ImportError:  # installed without a C compiler: the numpy version below
+    _lm = None
+
+#: Whether :func:`levenberg_marquardt` runs compiled.
+NATIVE_LM = _lm is not None
 
 # Rows of q x a and q x b (a = (1, 0, -u), b = (0, 1, -v)) as q @ _CROSS, q = R X a row:
 # (-qy, qx, 0) multiplies u (and v); (0, qz, -qy) and (-qz, 0, qx) are the constant parts.
@@ -137,7 +149,7 @@ def residuals_and_jacobian(
 
 
 def levenberg_marquardt(
-    params: FloatArray, X: FloatArray, xy: FloatArray, f: FloatArray, max_iter: int
+    params: FloatArray, X: FloatArray, xy: FloatArray, f: FloatArray, max_iter: int, *, native: bool | None = None
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Refine S starts at once.
 
@@ -156,6 +168,9 @@ def levenberg_marquardt(
     X, xy, f
         As for :func:`reprojection_residuals`.
     max_iter : int
+    native : bool or None
+        Run the compiled version (``True``) or the numpy one (``False``); ``None``: the
+        compiled one when it was built (:data:`NATIVE_LM`).
 
     Returns
     -------
@@ -167,9 +182,19 @@ def levenberg_marquardt(
         ``J^T J``.
     """
     x = np.array(params, dtype=np.float64)
+    S = len(x)
+    if native is None:
+        native = NATIVE_LM
+    if native:
+        if _lm is None:
+            raise RuntimeError("visloc.pose._lm was not built (no C compiler at install)")
+        raw_x, raw_cost, raw_M = _lm.levenberg_marquardt(
+            np.ascontiguousarray(x), np.ascontiguousarray(X, np.float64), np.ascontiguousarray(xy, np.float64),
+            float(f[0, 0]), float(f[1, 0]), int(max_iter), RTOL, RTOL_OTHER, MAX_ITER_OTHER, ATOL)
+        return (np.frombuffer(raw_x, np.float64).reshape(S, 6).copy(), np.frombuffer(raw_cost, np.float64).copy(),
+                np.frombuffer(raw_M, np.float64).reshape(S, 7, 7).copy())
     E = residuals_and_jacobian(x, X, xy, f)
     M = E.mT @ E
-    S = len(x)
     # bookkeeping in Python scalars: S is a handful
     cost = M[:, 6, 6].tolist()
     lam = [1e-3] * S

@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from visloc.pose.camera import Camera
-from visloc.pose.gauss_newton import refine_params, residuals_and_jacobian
+from visloc.pose.gauss_newton import levenberg_marquardt, refine_params
 from visloc.pose.maps import MarkerMap
 from visloc.pose.marker_pose import MIN_PIXEL_SIGMA
 from visloc.pose.planar import planar_solutions
@@ -183,8 +183,7 @@ def estimate_camera_pose(
         rejected.append(ids[worst])
         params = best[None]
     X = obj[keep].reshape(-1, 3)
-    E = residuals_and_jacobian(best[None], X.T, xy[keep].reshape(-1, 2).T, f)[0]
-    M = E.T @ E
+    M = levenberg_marquardt(best[None], X.T.copy(), xy[keep].reshape(-1, 2).T.copy(), f, 0)[2][0]  # [J | r]^T [J | r]
     n = 2 * X.shape[0]
     rms = float(np.sqrt(M[6, 6] / n))
     cov = _covariance(M, n, pixel_sigma)

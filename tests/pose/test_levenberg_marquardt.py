@@ -1,0 +1,53 @@
+"""The compiled Levenberg-Marquardt takes the numpy version's steps."""
+
+import numpy as np
+import pytest
+
+from visloc.pose.gauss_newton import NATIVE_LM, _project, levenberg_marquardt
+
+
+def _problem(rng, planar):
+    n = int(rng.integers(4, 60))
+    X = np.c_[rng.uniform(-0.5, 0.5, (n, 2)), np.zeros(n) if planar else rng.uniform(-0.1, 0.1, n)].T.copy()
+    truth = np.r_[rng.uniform(-0.3, 0.3, 2), rng.uniform(0.8, 2.5), rng.uniform(-0.5, 0.5, 3)]
+    uv = _project(truth[None], X)[1][0]
+    xy = uv + rng.normal(0, 0.5 / 500, uv.shape)
+    starts = truth + rng.normal(0, 0.2, (int(rng.integers(1, 5)), 6))
+    starts[:, 2] = np.abs(starts[:, 2]) + 0.3
+    return X, xy, starts, truth
+
+
+@pytest.mark.skipif(not NATIVE_LM, reason="compares the compiled solver with the numpy one")
+def test_compiled_and_numpy_solvers_agree():
+    rng = np.random.default_rng(0)
+    f = np.array([[500.0], [500.0]])
+    close = 0
+    for case in range(120):
+        X, xy, starts, truth = _problem(rng, planar=case % 2 == 0)
+        if case % 7 == 0:
+            starts[0, 2] = -1.0  # a start that puts the points behind the camera
+        for max_iter in (0, 30):
+            with np.errstate(invalid="ignore"):  # numpy's M of a start behind the camera
+                want = levenberg_marquardt(starts, X, xy, f, max_iter, native=False)
+            got = levenberg_marquardt(starts, X, xy, f, max_iter, native=True)
+            finite = np.isfinite(want[1])
+            assert (finite == np.isfinite(got[1])).all()
+            np.testing.assert_allclose(got[0][finite], want[0][finite], rtol=0, atol=1e-9)
+            np.testing.assert_allclose(got[1][finite], want[1][finite], rtol=1e-9)
+            np.testing.assert_allclose(got[2][finite], want[2][finite], rtol=1e-9, atol=1e-9)
+        best = got[0][np.argmin(got[1])]
+        close += np.abs(best - truth).max() < 0.05
+    assert close > 100  # and they do solve the problems
+
+
+@pytest.mark.skipif(not NATIVE_LM, reason="the compiled solver's singular case")
+def test_a_parameter_without_effect_takes_the_pseudo_inverse_step():
+    # one point seen: rank-deficient normal equations; both versions must return finite steps
+    X = np.array([[0.0], [0.0], [0.0]])
+    xy = np.array([[0.01], [0.02]])
+    f = np.array([[500.0], [500.0]])
+    start = np.array([[0.0, 0.0, 1.0, 0.0, 0.0, 0.0]])
+    got = levenberg_marquardt(start, X, xy, f, 10, native=True)
+    want = levenberg_marquardt(start, X, xy, f, 10, native=False)
+    assert np.isfinite(got[0]).all() and got[1][0] < 1e-6
+    np.testing.assert_allclose(got[1], want[1], atol=1e-9)

@@ -59,7 +59,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 #: help of ``--fast`` (detect, localize, track): ``visloc.markers.FAST_PASSES``
-_FAST_HELP = "search shrunk images only: about 30%% faster at 640x480 and above, misses markers under about 20 px"
+_FAST_HELP = "search shrunk images only: about 15-25%% faster at 640x480 and above, misses markers under about 20 px"
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -225,6 +225,8 @@ def test_constructor_errors():
         MarkerDetector("DICT_NOPE")
     with pytest.raises(ValueError, match="scale"):
         MarkerDetector("DICT_4X4_50", passes=[(0.5, 9)])
+    with pytest.raises(ValueError, match="at least one search pass"):
+        MarkerDetector("DICT_4X4_50", passes=[])
 
 
 def _same(a, b):

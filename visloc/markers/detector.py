@@ -241,6 +241,8 @@ class MarkerDetector:
         if "passes" in params:
             params["passes"] = tuple(_as_pass(p) for p in params["passes"])  # type: ignore[union-attr]
         self.params = replace(DetectorParams(), **params)  # type: ignore[arg-type]
+        if not self.params.passes:
+            raise ValueError("passes: at least one search pass is needed")
 
     def __repr__(self) -> str:
         return f"MarkerDetector({self.dictionary.name!r}, {self.params})"

@@ -19,7 +19,7 @@
  * points and one of offsets, so no Python object is made per border.
  *
  * enclosing_borders(binary, height, width, min_len, max_len)
- *     -> (points: bytes of int32 (x, y) pairs, offsets: bytes of int64 (K + 1), n_outer: int)
+ *     -> (points: bytes of int32 (x, y) pairs, offsets: bytes of int64 (K + 1))
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -196,7 +196,7 @@ static PyObject *enclosing_borders(PyObject *self, PyObject *args) {
     int64_t *row_start = (int64_t *)malloc((size_t)(h + 1) * sizeof(int64_t));
     int64_t *holes = NULL;   /* per root: pairs - runs */
     int64_t *borders = NULL; /* per kept border: first point index */
-    int64_t n_borders = 0, n_outer = 0;
+    int64_t n_borders = 0;
     int failed = row_start == NULL;
     Py_BEGIN_ALLOW_THREADS
     if (!failed) failed = label(g, h, w, &r, row_start) != 0;
@@ -207,9 +207,7 @@ static PyObject *enclosing_borders(PyObject *self, PyObject *args) {
     }
     if (!failed) {
         for (int64_t i = 0; i < r.n; i++) {
-            int32_t root = find(r.parent, (int32_t)i);
-            holes[root] += r.pairs[i] - 1;
-            n_outer += root == i;
+            holes[find(r.parent, (int32_t)i)] += r.pairs[i] - 1;
         }
         /* the outer borders of the regions with a hole (pairs - runs + 1 > 0), last found first */
         int64_t y = h - 1;
@@ -238,7 +236,7 @@ static PyObject *enclosing_borders(PyObject *self, PyObject *args) {
             int64_t *o = (int64_t *)PyBytes_AS_STRING(offsets);
             for (int64_t k = 0; k < n_borders; k++) o[k] = borders[k];
             o[n_borders] = pts.n / 2;
-            result = Py_BuildValue("(NNn)", points, offsets, (Py_ssize_t)n_outer);
+            result = Py_BuildValue("(NN)", points, offsets);
         } else {
             Py_XDECREF(points);
             Py_XDECREF(offsets);
@@ -257,7 +255,7 @@ static PyObject *enclosing_borders(PyObject *self, PyObject *args) {
 
 static PyMethodDef methods[] = {
     {"enclosing_borders", enclosing_borders, METH_VARARGS,
-     "enclosing_borders(binary, height, width, min_len, max_len) -> (points, offsets, n_outer)\n\n"
+     "enclosing_borders(binary, height, width, min_len, max_len) -> (points, offsets)\n\n"
      "Outer borders (8-connected ink) that enclose a hole, packed; see visloc.markers.contours."},
     {NULL, NULL, 0, NULL},
 };

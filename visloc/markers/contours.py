@@ -27,7 +27,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from visloc.markers._compiled import use_compiled
+from visloc._compiled import use_compiled
 
 _NEXT = np.array([1, 2, 3, 0])
 
@@ -74,9 +74,9 @@ def enclosing_borders(binary: NDArray[np.uint8], min_len: int = 1, max_len: int 
     if binary.ndim != 2 or binary.dtype != np.uint8:
         raise ValueError(f"binary must be a (H, W) uint8 image, got {binary.shape} {binary.dtype}")
     hi = np.iinfo(np.int64).max if max_len is None else int(max_len)
-    if use_compiled(native, _borders, "_borders"):
+    if use_compiled(native, _borders, "visloc.markers._borders"):
         b = np.ascontiguousarray(binary)
-        raw, raw_offsets, _ = _borders.enclosing_borders(b, b.shape[0], b.shape[1], int(min_len), hi)
+        raw, raw_offsets = _borders.enclosing_borders(b, b.shape[0], b.shape[1], int(min_len), hi)
         pts = np.frombuffer(raw, np.int32).reshape(-1, 2)
         at = np.frombuffer(raw_offsets, np.int64).tolist()
         return [pts[a:e] for a, e in pairwise(at)]
@@ -175,7 +175,7 @@ def filter_candidates(
     """
     h, w = image_shape[:2]
     lo, hi = perimeter_bounds(image_shape, params)
-    if use_compiled(native, _filter, "_filter") and contours:
+    if use_compiled(native, _filter, "visloc.markers._filter") and contours:
         flat = [np.asarray(c).reshape(-1, 2) for c in contours]
         pts = np.ascontiguousarray(np.concatenate(flat), np.int32)
         offsets = np.concatenate([[0], np.cumsum([len(c) for c in flat])]).astype(np.int64)

@@ -29,7 +29,7 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import NDArray
 
-from visloc.markers._compiled import use_compiled
+from visloc._compiled import use_compiled
 from visloc.markers.corners import _NEXT, RadialSplit, fit_lines, profile_stride, quad_from_lines
 
 try:
@@ -169,7 +169,7 @@ def fit_quads(
         return np.zeros((0, 4, 2)), np.zeros(0, bool), [] if splits else None
     if sigma is not None and not sigma > 0:
         raise ValueError(f"sigma must be > 0 (or None), got {sigma}")
-    if not use_compiled(native, _quads, "_quads"):
+    if not use_compiled(native, _quads, "visloc.markers._quads"):
         return _fit_quads_numpy(contours, hints, sigma, padding, splits)
     lengths = np.array([len(c) for c in contours], np.int64)
     if (lengths < 4).any():

@@ -289,11 +289,11 @@ class MarkerDetector:
         worker thread meanwhile, up to :data:`_THREAD_MAX_PIXELS` (beyond, OpenCV's own
         threads already keep both cores of the bench machine busy and the hand-over only
         adds to the slowest frames)."""
-        first, *rest = self.params.passes
         if gray.size > _THREAD_MAX_PIXELS:
             for sp in self.params.passes:
                 yield self._search(gray, sp, base)
             return
+        first, *rest = self.params.passes
         later = [_pool().submit(self._search, gray, sp, base) for sp in rest]
         try:
             yield self._search(gray, first, base)

@@ -26,7 +26,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from visloc.markers._compiled import use_compiled
+from visloc._compiled import use_compiled
 from visloc.markers.corners import _NEXT, fit_lines, quad_from_lines
 
 try:
@@ -158,7 +158,7 @@ def refine_quads(
         raise ValueError(f"radius must be >= 1, got {radius}")
     if count < 2 or iterations < 1:
         raise ValueError(f"count must be >= 2 and iterations >= 1, got {count} and {iterations}")
-    if use_compiled(native, _refine, "_refine"):
+    if use_compiled(native, _refine, "visloc.markers._refine"):
         g = np.ascontiguousarray(gray)
         raw, raw_ok = _refine.refine_quads(g, g.shape[0], g.shape[1], np.ascontiguousarray(q0),
                                            np.ascontiguousarray(r, np.int64), int(iterations), int(count), _END_GAP)

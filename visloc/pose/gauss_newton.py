@@ -20,6 +20,7 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike
 
+from visloc._compiled import use_compiled
 from visloc.types import FloatArray
 
 #: LM stops a start when a step lowers its squared error by less than this fraction (at a
@@ -183,11 +184,7 @@ def levenberg_marquardt(
     """
     x = np.array(params, dtype=np.float64)
     S = len(x)
-    if native is None:
-        native = NATIVE_LM
-    if native:
-        if _lm is None:
-            raise RuntimeError("visloc.pose._lm was not built (no C compiler at install)")
+    if use_compiled(native, _lm, "visloc.pose._lm"):
         raw_x, raw_cost, raw_M = _lm.levenberg_marquardt(
             np.ascontiguousarray(x), np.ascontiguousarray(X, np.float64), np.ascontiguousarray(xy, np.float64),
             float(f[0, 0]), float(f[1, 0]), int(max_iter), RTOL, RTOL_OTHER, MAX_ITER_OTHER, ATOL)

@@ -183,7 +183,7 @@ def estimate_camera_pose(
         rejected.append(ids[worst])
         params = best[None]
     X = obj[keep].reshape(-1, 3)
-    M = levenberg_marquardt(best[None], X.T.copy(), xy[keep].reshape(-1, 2).T.copy(), f, 0)[2][0]  # [J | r]^T [J | r]
+    M = levenberg_marquardt(best[None], X.T, xy[keep].reshape(-1, 2).T, f, 0)[2][0]  # [J | r]^T [J | r]
     n = 2 * X.shape[0]
     rms = float(np.sqrt(M[6, 6] / n))
     cov = _covariance(M, n, pixel_sigma)

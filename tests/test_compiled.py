@@ -6,17 +6,17 @@ import types
 
 import pytest
 
-from visloc.markers._compiled import use_compiled
+from visloc._compiled import use_compiled
 
 
 def test_use_compiled_follows_the_request_and_what_was_built():
     built = types.ModuleType("_stage")
-    assert use_compiled(None, built, "_stage") is True
-    assert use_compiled(None, None, "_stage") is False
-    assert use_compiled(False, built, "_stage") is False
-    assert use_compiled(True, built, "_stage") is True
+    assert use_compiled(None, built, "visloc.markers._stage") is True
+    assert use_compiled(None, None, "visloc.markers._stage") is False
+    assert use_compiled(False, built, "visloc.markers._stage") is False
+    assert use_compiled(True, built, "visloc.markers._stage") is True
     with pytest.raises(RuntimeError, match=r"visloc\.markers\._stage was not built"):
-        use_compiled(True, None, "_stage")
+        use_compiled(True, None, "visloc.markers._stage")
 
 
 def _compiler() -> str | None:
@@ -29,5 +29,7 @@ def test_every_stage_was_compiled_where_a_compiler_is():
     """With a compiler at install the C code must have been built: a broken build would
     otherwise fall back silently and only the bench would notice."""
     from visloc.markers import contours, corners_batch, refine
+    from visloc.pose import gauss_newton
 
     assert contours.NATIVE_BORDERS and corners_batch.NATIVE_QUADS and refine.NATIVE_REFINE
+    assert gauss_newton.NATIVE_LM

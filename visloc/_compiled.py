@@ -8,11 +8,11 @@ __all__ = ["use_compiled"]
 
 
 def use_compiled(native: bool | None, module: ModuleType | None, name: str) -> bool:
-    """Whether to run the compiled module ``visloc.markers.<name>``: ``native=None`` when it
-    was built, ``False`` never, ``True`` always (a ``RuntimeError`` when it was not built:
-    the package was installed without a C compiler)."""
+    """Whether to run the compiled module ``name`` (e.g. ``"visloc.markers._borders"``):
+    ``native=None`` when it was built, ``False`` never, ``True`` always (a ``RuntimeError``
+    when it was not built: the package was installed without a C compiler)."""
     if native is None:
         return module is not None
     if native and module is None:
-        raise RuntimeError(f"visloc.markers.{name} was not built (no C compiler at install)")
+        raise RuntimeError(f"{name} was not built (no C compiler at install)")
     return bool(native)

@@ -31,6 +31,18 @@ def _positive(text: str) -> float:
     return v
 
 
+def _response(text: str) -> str | float:
+    if text in ("srgb", "linear"):
+        return text
+    try:
+        g = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected srgb, linear or a gamma, got {text!r}") from None
+    if not (0 < g < 10):
+        raise argparse.ArgumentTypeError(f"a gamma must be in (0, 10), got {text!r}")
+    return g
+
+
 def _size(text: str) -> tuple[int, int]:
     try:
         w, h = (int(v) for v in text.lower().split("x"))
@@ -60,6 +72,9 @@ class _Parser(argparse.ArgumentParser):
 
 #: help of ``--fast`` (detect, localize, track): ``visloc.markers.FAST_PASSES``
 _FAST_HELP = "search shrunk images only: about 15-25%% faster at 640x480 and above, misses markers under about 20 px"
+#: help of ``--response`` (detect, localize, track): ``DetectorParams.response``
+_RESPONSE_HELP = ("how grey levels encode light, for sub-pixel corners: srgb (cameras, most image files; "
+                  "the default), linear (linear sensor data, renders made with --linear) or a gamma")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -88,6 +103,11 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--fps", type=_positive, help="frame rate for image lists (frame times)")
     d.add_argument("--max-frames", type=_count, metavar="N", help="stop after N frames")
     d.add_argument("--fast", action="store_true", help=_FAST_HELP)
+    d.add_argument("--response", type=_response, default="srgb", metavar="srgb|linear|GAMMA", help=_RESPONSE_HELP)
+    d.add_argument("--border-bits", type=int, default=1, choices=(1, 2, 3),
+                   help="width of the markers' black border in cells (default 1)")
+    d.add_argument("--inverted", default="no", choices=("no", "yes", "both"),
+                   help="white-on-black markers: no (default), yes (only those), both")
     d.add_argument("--quiet", action="store_true", help="no progress bar or summary")
 
     r = sub.add_parser("render", help="render synthetic data with exact ground truth")
@@ -98,7 +118,10 @@ def build_parser() -> argparse.ArgumentParser:
     rm.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
     rm.add_argument("--size", type=_size, default=(640, 480), help="WIDTHxHEIGHT (default 640x480)")
     rm.add_argument("--dict", default="DICT_4X4_50", metavar="NAME|FILE", help="dictionary")
-    rm.add_argument("--difficulty", default="easy", choices=["easy", "hard", "small", "empty"])
+    rm.add_argument("--difficulty", default="easy", choices=["easy", "hard", "small", "dark", "empty"])
+    rm.add_argument("--linear", action="store_true",
+                    help="linear renders (grey levels linear in light, no lens) instead of camera-like "
+                         "frames (lens distortion, blur, noise, vignetting, sRGB, JPEG)")
     rm.add_argument("--video", action="store_true", help="write markers.mp4 of a moving camera instead")
     rp = rs.add_parser("map", help="a printable image of a marker map (its z = 0 plane)")
     rp.add_argument("map", help="marker map (OpenCV YAML)")
@@ -147,6 +170,11 @@ def build_parser() -> argparse.ArgumentParser:
     lz.add_argument("--rerun", metavar="FILE.rrd", help="write a rerun recording (estimate vs truth)")
     lz.add_argument("--max-frames", type=_count, metavar="N", help="stop after N frames")
     lz.add_argument("--fast", action="store_true", help=_FAST_HELP)
+    lz.add_argument("--response", type=_response, default="srgb", metavar="srgb|linear|GAMMA", help=_RESPONSE_HELP)
+    lz.add_argument("--border-bits", type=int, default=1, choices=(1, 2, 3),
+                   help="width of the markers' black border in cells (default 1)")
+    lz.add_argument("--inverted", default="no", choices=("no", "yes", "both"),
+                   help="white-on-black markers: no (default), yes (only those), both")
     lz.add_argument("--quiet", action="store_true", help="no progress bar or summary")
 
     tk = sub.add_parser("track", help="a body's markers relative to reference markers, seen by a fixed camera")
@@ -163,6 +191,11 @@ def build_parser() -> argparse.ArgumentParser:
                     help="velocity observer poles, 1/s (report eq. 3.14; default -4 -4)")
     tk.add_argument("--max-frames", type=_count, metavar="N", help="stop after N frames")
     tk.add_argument("--fast", action="store_true", help=_FAST_HELP)
+    tk.add_argument("--response", type=_response, default="srgb", metavar="srgb|linear|GAMMA", help=_RESPONSE_HELP)
+    tk.add_argument("--border-bits", type=int, default=1, choices=(1, 2, 3),
+                   help="width of the markers' black border in cells (default 1)")
+    tk.add_argument("--inverted", default="no", choices=("no", "yes", "both"),
+                   help="white-on-black markers: no (default), yes (only those), both")
     tk.add_argument("--quiet", action="store_true", help="no progress bar or summary")
 
     md = sub.add_parser("model", help="the AR.Drone 2.0 model: identified parameters, hover trim, linear poles")

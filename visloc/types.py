@@ -89,6 +89,12 @@ class MarkerDetection:
     refined : bool
         Whether the corners come from the grey-level edge refinement (stage 8); False when
         it failed (occluded or cluttered sides) and the contour line fits were kept.
+    confidence : float
+        Bit certainty in [0, 1]: the mean over the marker's bits of how clearly each cell's
+        samples agree with the decoded code (+1 all samples agree, -1 all disagree), clipped
+        at 0. 1 for a clean read; corrected bits and mixed cells lower it.
+    inverted : bool
+        Whether the marker is white on black (found with ``inverted=True`` or ``"both"``).
     """
 
     id: int
@@ -98,6 +104,8 @@ class MarkerDetection:
     rotation: int = 0
     contrast: float = 0.0
     refined: bool = True
+    confidence: float = 1.0
+    inverted: bool = False
 
     @property
     def center(self) -> FloatArray:
@@ -113,14 +121,19 @@ class MarkerDetection:
         return p[0] + s * d1
 
     def to_dict(self) -> dict:
-        """JSON-ready dict: ``id``, ``corners`` (list of [x, y]), ``hamming``, ``margin``."""
-        return {
+        """JSON-ready dict: ``id``, ``corners`` (list of [x, y]), ``hamming``, ``margin``,
+        ``confidence``, ``refined`` and, for white-on-black markers, ``inverted``."""
+        out = {
             "id": int(self.id),
             "corners": [[round(float(x), 4), round(float(y), 4)] for x, y in self.corners],
             "hamming": int(self.hamming),
             "margin": round(float(self.margin), 4),
+            "confidence": round(float(self.confidence), 4),
             "refined": bool(self.refined),
         }
+        if self.inverted:
+            out["inverted"] = True
+        return out
 
 
 @dataclass(frozen=True, eq=False)

@@ -183,3 +183,19 @@ def test_robust_json_reports_a_stable_polytope_and_rejects_a_sigma_beyond_the_bo
     assert s["max_real_eig"] < 0 and s["lyapunov"] in {"feasible", "infeasible", "unavailable"}
     assert main(["robust", "--sigma", "99"]) == 2
     assert "n_sigma" in capsys.readouterr().err
+
+
+def test_border_bits_inverted_and_confidence_from_the_command_line(tmp_path):
+    d = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50)
+    sheet = np.full((200, 400), 255, np.uint8)
+    sheet[40:160, 40:160] = cv2.aruco.generateImageMarker(d, 12, 120, borderBits=2)
+    sheet[20:180, 220:380] = 0  # a white-on-black marker on a black card
+    sheet[40:160, 240:360] = 255 - cv2.aruco.generateImageMarker(d, 31, 120)
+    cv2.imwrite(str(tmp_path / "sheet.png"), cv2.GaussianBlur(sheet, (0, 0), 0.7))
+    out = tmp_path / "m.jsonl"
+    assert main(["detect", str(tmp_path / "sheet.png"), "--border-bits", "2", "--out", str(out), "--quiet"]) == 0
+    (rec,) = _lines(out)
+    assert [m["id"] for m in rec["markers"]] == [12] and rec["markers"][0]["confidence"] > 0.9
+    assert main(["detect", str(tmp_path / "sheet.png"), "--inverted", "both", "--out", str(out), "--quiet"]) == 0
+    (rec,) = _lines(out)
+    assert [(m["id"], m.get("inverted", False)) for m in rec["markers"]] == [(31, True)]

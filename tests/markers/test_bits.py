@@ -32,7 +32,7 @@ def test_sample_cells_reads_a_drawn_marker():
     sample = sample_cells(img, quad, 6)
     assert sample.cells.shape == (1, 6, 6) and sample.ring.shape == (1, 28)
     assert np.allclose(sample.ring, 255)
-    valid, bits, margin, contrast = read_bits(sample)
+    valid, bits, margin, contrast, _ = read_bits(sample)
     assert valid[0] and np.array_equal(bits[0], d.bits[7])
     assert margin[0] > 0.95 and contrast[0] > 250
     ids, shift, hamming, ok = decode(bits, d)

@@ -2,6 +2,7 @@
 
 import json
 
+import cv2
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -22,7 +23,8 @@ def _match(dets, scene):
 
 @pytest.fixture(scope="module")
 def detector():
-    return MarkerDetector("DICT_4X4_50")
+    """The detector for visloc's linear renders (their grey levels are linear in light)."""
+    return MarkerDetector("DICT_4X4_50", response="linear")
 
 
 def test_clean_renders_are_found_with_hundredth_pixel_corners(detector):
@@ -227,6 +229,68 @@ def test_constructor_errors():
         MarkerDetector("DICT_4X4_50", passes=[(0.5, 9)])
     with pytest.raises(ValueError, match="at least one search pass"):
         MarkerDetector("DICT_4X4_50", passes=[])
+    with pytest.raises(ValueError, match="border_bits"):
+        MarkerDetector("DICT_4X4_50", border_bits=4)
+    with pytest.raises(ValueError, match="inverted"):
+        MarkerDetector("DICT_4X4_50", inverted="yes")
+    with pytest.raises(ValueError, match="response"):
+        MarkerDetector("DICT_4X4_50", response="log")
+
+
+def _sheet(ids, border_bits=1, cell=12, invert=False):
+    """Markers drawn by OpenCV side by side on white, 2 cells apart, a 3-cell margin, blurred in
+    linear light and sRGB-encoded as a camera writes them; returns the image and each marker's
+    geometric corners (pixel (c, r) covers c - 0.5 .. c + 0.5)."""
+    d = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50)
+    side = (4 + 2 * border_bits) * cell
+    img = np.full((side + 6 * cell, len(ids) * (side + 2 * cell) + 4 * cell), 255, np.uint8)
+    corners = {}
+    for k, i in enumerate(ids):
+        x0, y0 = 3 * cell + k * (side + 2 * cell), 3 * cell
+        img[y0 : y0 + side, x0 : x0 + side] = cv2.aruco.generateImageMarker(d, i, side, borderBits=border_bits)
+        corners[i] = np.array([[x0, y0], [x0 + side, y0], [x0 + side, y0 + side], [x0, y0 + side]]) - 0.5
+    light = cv2.GaussianBlur((255 - img if invert else img).astype(np.float64) / 255, (0, 0), 0.7)
+    encoded = np.where(light <= 0.0031308, 12.92 * light, 1.055 * light ** (1 / 2.4) - 0.055)
+    return np.round(255 * encoded).astype(np.uint8), corners
+
+
+@pytest.mark.parametrize("border_bits", [2, 3])
+def test_thick_borders_need_border_bits(border_bits):
+    img, truth = _sheet([3, 17, 40], border_bits)
+    assert MarkerDetector("DICT_4X4_50", border_bits=1).detect(img) == []
+    dets = MarkerDetector("DICT_4X4_50", border_bits=border_bits).detect(img)
+    assert [d.id for d in dets] == [3, 17, 40]
+    for d in dets:
+        assert np.abs(d.corners - truth[d.id]).max() < 0.1
+
+
+def test_inverted_markers_by_polarity():
+    normal, truth = _sheet([5, 9])
+    white_on_black, _ = _sheet([21, 33], invert=True)
+    img = np.hstack([normal, white_on_black])
+    shifted = {i: c + [normal.shape[1], 0] for i, c in _sheet([21, 33])[1].items()}
+    assert [d.id for d in MarkerDetector("DICT_4X4_50").detect(img)] == [5, 9]
+    inv = MarkerDetector("DICT_4X4_50", inverted=True).detect(img)
+    assert [d.id for d in inv] == [21, 33] and all(d.inverted for d in inv)
+    both = MarkerDetector("DICT_4X4_50", inverted="both").detect(img)
+    assert [(d.id, d.inverted) for d in both] == [(5, False), (9, False), (21, True), (33, True)]
+    for d in both:
+        assert np.abs(d.corners - (shifted if d.inverted else truth)[d.id]).max() < 0.1
+        assert d.to_dict().get("inverted", False) == d.inverted
+
+
+def test_confidence_falls_with_damaged_cells():
+    img, truth = _sheet([7])
+    (clean,) = MarkerDetector("DICT_4X4_50").detect(img)
+    assert clean.confidence > 0.95 and clean.to_dict()["confidence"] == round(clean.confidence, 4)
+    bits = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50).generateImageMarker(7, 6)
+    r, c = np.argwhere(bits[1:5, 1:5] == 0)[0] + 1  # a black cell of the code: paint half of it white
+    x0, y0 = truth[7][0] + 0.5
+    damaged = img.copy()
+    damaged[int(y0 + r * 12) : int(y0 + r * 12 + 12), int(x0 + c * 12) : int(x0 + c * 12 + 5)] = 255
+    (hurt,) = MarkerDetector("DICT_4X4_50").detect(damaged)
+    assert hurt.id == 7 and hurt.hamming == 0  # under half the cell: the majority still reads black
+    assert hurt.confidence < clean.confidence - 0.02
 
 
 def _same(a, b):

@@ -21,7 +21,7 @@ def floor():
 
 def test_floor_view_localises_to_the_true_pose(floor):
     K = np.array([[320.0, 0, 159.5], [0, 320.0, 119.5], [0, 0, 1]])
-    det, cam = MarkerDetector("DICT_4X4_50"), Camera(K)
+    det, cam = MarkerDetector("DICT_4X4_50", response="linear"), Camera(K)  # linear renders
     rng = np.random.default_rng(2)
     centre = np.array([0.2875, -0.2875, 0.0])
     for _ in range(5):

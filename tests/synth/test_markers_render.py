@@ -215,7 +215,7 @@ def test_render_dataset_writes_readable_files(tmp_path):
     assert seen == [0, 1]
     gt = json.loads((out / "ground_truth.json").read_text())
     assert gt["dictionary"] == "DICT_4X4_50" and gt["size"] == [160, 120]
-    assert gt["camera"]["dist"] == [0, 0, 0, 0, 0]
+    assert gt["camera"]["dist"] == [-0.05, 0, 0, 0, 0] and gt["camera_like"]  # DATASET_LENS
     assert len(gt["frames"]) == 2
     for frame in gt["frames"]:
         img = cv2.imread(str(out / frame["file"]), cv2.IMREAD_UNCHANGED)
@@ -223,13 +223,18 @@ def test_render_dataset_writes_readable_files(tmp_path):
         for m in frame["markers"]:
             assert set(m) >= {"id", "corners", "rvec", "tvec", "length"}
             proj, _ = cv2.projectPoints(marker_object_points(m["length"]), np.array(m["rvec"]),
-                                        np.array(m["tvec"]), np.array(gt["camera"]["K"]), None)
+                                        np.array(m["tvec"]), np.array(gt["camera"]["K"]),
+                                        np.array(gt["camera"]["dist"]))
             np.testing.assert_allclose(proj.reshape(4, 2), m["corners"], atol=1e-6)
     fs = cv2.FileStorage(str(out / "camera.yml"), cv2.FILE_STORAGE_READ)
     np.testing.assert_allclose(fs.getNode("camera_matrix").mat(), gt["camera"]["K"])
-    assert fs.getNode("distortion_coefficients").mat().shape == (1, 5)
+    np.testing.assert_allclose(fs.getNode("distortion_coefficients").mat(), [gt["camera"]["dist"]])
     assert int(fs.getNode("image_width").real()) == 160
     fs.release()
+    fs.release()
+    linear = json.loads((render_dataset(tmp_path / "lin", 1, seed=3, size=(160, 120), camera=False)
+                         / "ground_truth.json").read_text())
+    assert linear["camera"]["dist"] == [0, 0, 0, 0, 0] and not linear["camera_like"]
     # frame i does not depend on n
     again = render_dataset(tmp_path / "ds1", 1, seed=3, size=(160, 120))
     assert np.array_equal(cv2.imread(str(again / "frame_0000.png"), cv2.IMREAD_UNCHANGED),

@@ -18,11 +18,13 @@ def warn(command: str, text: str) -> None:
 
 
 def detector_for(args: argparse.Namespace) -> MarkerDetector:
-    """The marker detector of ``--dict``; with ``--fast`` it searches shrunk images
-    (:data:`visloc.markers.FAST_PASSES`)."""
+    """The marker detector of ``--dict``, ``--response``, ``--border-bits`` and ``--inverted``;
+    with ``--fast`` it searches shrunk images (:data:`visloc.markers.FAST_PASSES`)."""
+    options = {"response": args.response, "border_bits": args.border_bits,
+               "inverted": {"no": False, "yes": True, "both": "both"}[args.inverted]}
     if args.fast:
-        return MarkerDetector(args.dict, passes=FAST_PASSES)
-    return MarkerDetector(args.dict)
+        options["passes"] = FAST_PASSES
+    return MarkerDetector(args.dict, **options)
 
 def frames_of(source, args: argparse.Namespace):
     """The frames of an open source with a progress bar (unless ``--quiet``), stopping after

@@ -28,8 +28,9 @@ def demo(args: argparse.Namespace) -> int:
     rows = []
     with JsonlWriter(out / "detections.jsonl") as jsonl, AnnotationSink(out / "annotated") as sink:
         for i in range(args.frames):
-            scene = random_scene(rng, size=(640, 480), difficulty="easy" if i % 2 == 0 else "hard")
-            camera = Camera(scene.K, size=(640, 480))
+            # camera-like frames: lens, blur, noise, vignetting, sRGB, JPEG (visloc.synth.camera)
+            scene = random_scene(rng, size=(640, 480), difficulty="easy" if i % 2 == 0 else "hard", camera=True)
+            camera = Camera(scene.K, scene.dist, size=(640, 480))
             name = f"frame_{i:03d}.png"
             cv2.imwrite(str(out / "frames" / name), scene.image)
             t0 = time.perf_counter()
@@ -98,11 +99,11 @@ def _demo_localize() -> bool:
     from visloc.estimation.kalman import PositionVelocityKF
     from visloc.pose.map_pose import estimate_camera_pose
     from visloc.pose.maps import GridMap
-    from visloc.synth.grid import render_map_flight
+    from visloc.synth.grid import FLIGHT_CAMERA, render_map_flight
 
     grid = GridMap(**LOCALIZE_GRID)
     flight = render_map_flight(1.0, 30.0, grid, seed=4, dictionary="DICT_4X4_100", background="gravel",
-                               blur_sigma=0.5, noise_sigma=1.0)
+                               camera=FLIGHT_CAMERA)
     camera = Camera(flight.K, size=(320, 240))
     detector = MarkerDetector("DICT_4X4_100")
     kf = PositionVelocityKF(3, model="cv", accel_noise=2.0)

@@ -31,11 +31,11 @@ def render_localize(args: argparse.Namespace) -> int:
 
     from visloc.pose.maps import GridMap
     from visloc.synth import write_camera_yml
-    from visloc.synth.grid import render_map_flight
+    from visloc.synth.grid import FLIGHT_CAMERA, render_map_flight
 
     grid = GridMap(**LOCALIZE_GRID)
     flight = render_map_flight(args.seconds, args.fps, grid, seed=args.seed, dictionary="DICT_4X4_100",
-                               background="gravel", blur_sigma=0.5, noise_sigma=1.0)
+                               background="gravel", camera=FLIGHT_CAMERA)
     out = Path(args.outdir)
     out.mkdir(parents=True, exist_ok=True)
     for k, img in enumerate(flight.frames):

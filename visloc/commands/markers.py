@@ -89,7 +89,8 @@ def render(args: argparse.Namespace) -> int:
                                 dictionary=args.dict, progress=lambda i: bar.update(1))
         else:
             path = render_dataset(out, args.n, seed=args.seed, size=args.size, dictionary=args.dict,
-                                  difficulty=args.difficulty, progress=lambda i: bar.update(1))
+                                  difficulty=args.difficulty, camera=not args.linear,
+                                  progress=lambda i: bar.update(1))
     finally:
         bar.close()
     print(f"visloc render: wrote {args.n} frames and ground_truth.json to {path}")

@@ -6,13 +6,16 @@
  * the normalised step (e = r + 1/2 - sum v), profiles without a clean step dropped, weighted
  * total-least-squares lines (outliers of the last pass's first fit dropped), corners at their
  * intersections; `iterations` passes, each centred on the previous pass's lines. See
- * refine.py for the reasoning. One difference: samples are interpolated bilinearly in double
- * precision here, where the numpy version reads them through cv2.remap (coordinates rounded
- * to 1/32 px, values to whole grey levels); the corners of the two agree to about 0.01 px.
+ * refine.py for the reasoning. Grey levels are read through the camera's response (`lut`: the
+ * linear intensity of each grey level, visloc.markers.response) before they are interpolated.
+ * One difference: samples are interpolated bilinearly in double precision here, where the
+ * numpy version reads them through cv2.remap (coordinates rounded to 1/32 px); the corners of
+ * the two agree to about 0.01 px.
  *
- * refine_quads(gray, height, width, quads, radii, iterations, count, end_gap) -> (corners, ok)
- *     gray: uint8 (H, W) bytes; quads: float64 (K, 4, 2); radii: int64 (K,); returns float64
- *     (K, 4, 2) corners (the input where refinement failed) and uint8 (K,) flags, as bytes.
+ * refine_quads(gray, height, width, quads, radii, iterations, count, end_gap, lut) -> (corners, ok)
+ *     gray: uint8 (H, W) bytes; quads: float64 (K, 4, 2); radii: int64 (K,); lut: float64 (256,),
+ *     increasing; returns float64 (K, 4, 2) corners (the input where refinement failed) and
+ *     uint8 (K,) flags, as bytes.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -26,7 +29,23 @@
 typedef struct {
     const uint8_t *g;
     int64_t h, w;
+    const double *lut; /* linear intensity of each grey level */
 } image;
+
+/* The grey level whose linear intensity is v (the lut inverted, linear between entries). */
+static double to_grey(const double *lut, double v) {
+    int lo = 0, hi = 255;
+    if (v <= lut[0]) return 0;
+    if (v >= lut[255]) return 255;
+    while (hi - lo > 1) {
+        int mid = (lo + hi) / 2;
+        if (lut[mid] <= v)
+            lo = mid;
+        else
+            hi = mid;
+    }
+    return lo + (v - lut[lo]) / (lut[hi] - lut[lo]);
+}
 
 /* Bilinear grey level at (x, y), pixel centres at integers, borders replicated. */
 static double sample(const image *im, double x, double y) {
@@ -42,7 +61,8 @@ static double sample(const image *im, double x, double y) {
     if (y1 < 0) y1 = 0;
     if (y1 > im->h - 1) y1 = im->h - 1;
     const uint8_t *r0 = im->g + y0 * im->w, *r1 = im->g + y1 * im->w;
-    return (1 - ay) * ((1 - ax) * r0[x0] + ax * r0[x1]) + ay * ((1 - ax) * r1[x0] + ax * r1[x1]);
+    const double *L = im->lut;
+    return (1 - ay) * ((1 - ax) * L[r0[x0]] + ax * L[r0[x1]]) + ay * ((1 - ax) * L[r1[x0]] + ax * L[r1[x1]]);
 }
 
 /* Bilinear grey levels at n points (x0 + o dx, y0 + o dy), o = 0 .. n-1, into out: without
@@ -59,7 +79,8 @@ static void sample_line(const image *im, double x0, double y0, double dx, double
         int64_t xi = (int64_t)x, yi = (int64_t)y; /* floor: both are >= 0 here */
         double ax = x - (double)xi, ay = y - (double)yi;
         const uint8_t *r0 = im->g + yi * im->w + xi, *r1 = r0 + im->w;
-        out[o] = (1 - ay) * ((1 - ax) * r0[0] + ax * r0[1]) + ay * ((1 - ax) * r1[0] + ax * r1[1]);
+        const double *L = im->lut;
+        out[o] = (1 - ay) * ((1 - ax) * L[r0[0]] + ax * L[r0[1]]) + ay * ((1 - ax) * L[r1[0]] + ax * L[r1[1]]);
     }
 }
 
@@ -125,7 +146,7 @@ static int refine_one(const image *im, double q[8], int64_t r, int iterations, i
         memcpy(sorted, p_out, (size_t)n4 * sizeof(double));
         double hi = select_rank(sorted, n4, 2 * count);
         double span = hi - lo > 1e-6 ? hi - lo : 1e-6;
-        if (!(hi - lo >= 4.0)) return 0; /* no contrast */
+        if (!(to_grey(im->lut, hi) - to_grey(im->lut, lo) >= 4.0)) return 0; /* no contrast (grey levels) */
         double lines[4][3];
         for (int s = 0; s < 4; s++) {
             int64_t n_good = 0;
@@ -180,11 +201,12 @@ static int refine_one(const image *im, double q[8], int64_t r, int iterations, i
 
 static PyObject *refine_quads(PyObject *self, PyObject *args) {
     (void)self;
-    Py_buffer gray, quads, radii;
+    Py_buffer gray, quads, radii, lut;
     Py_ssize_t h, w, count;
     int iterations;
     double end_gap;
-    if (!PyArg_ParseTuple(args, "y*nny*y*ind", &gray, &h, &w, &quads, &radii, &iterations, &count, &end_gap))
+    if (!PyArg_ParseTuple(args, "y*nny*y*indy*", &gray, &h, &w, &quads, &radii, &iterations, &count, &end_gap,
+                          &lut))
         return NULL;
     Py_ssize_t k = quads.len / (8 * (Py_ssize_t)sizeof(double));
     const char *bad = NULL;
@@ -194,6 +216,8 @@ static PyObject *refine_quads(PyObject *self, PyObject *args) {
         bad = "quads/radii: expected K x 4 x 2 float64 and K int64 values";
     else if (count < 2 || iterations < 1)
         bad = "count must be >= 2 and iterations >= 1";
+    else if (lut.len != 256 * (Py_ssize_t)sizeof(double))
+        bad = "lut: expected 256 float64 values";
     const int64_t *rad = (const int64_t *)radii.buf;
     int64_t r_max = 1;
     for (Py_ssize_t i = 0; !bad && i < k; i++) {
@@ -210,7 +234,7 @@ static PyObject *refine_quads(PyObject *self, PyObject *args) {
         if (work && corners && ok) {
             double *c = (double *)PyBytes_AS_STRING(corners);
             uint8_t *flag = (uint8_t *)PyBytes_AS_STRING(ok);
-            image im = {(const uint8_t *)gray.buf, h, w};
+            image im = {(const uint8_t *)gray.buf, h, w, (const double *)lut.buf};
             Py_BEGIN_ALLOW_THREADS
             for (Py_ssize_t i = 0; i < k; i++)
                 flag[i] = (uint8_t)refine_one(&im, c + 8 * i, rad[i], iterations, count, end_gap, work);
@@ -226,12 +250,13 @@ static PyObject *refine_quads(PyObject *self, PyObject *args) {
     PyBuffer_Release(&gray);
     PyBuffer_Release(&quads);
     PyBuffer_Release(&radii);
+    PyBuffer_Release(&lut);
     return result;
 }
 
 static PyMethodDef methods[] = {
     {"refine_quads", refine_quads, METH_VARARGS,
-     "refine_quads(gray, height, width, quads, radii, iterations, count, end_gap) -> (corners, ok)\n\n"
+     "refine_quads(gray, height, width, quads, radii, iterations, count, end_gap, lut) -> (corners, ok)\n\n"
      "Stage 8 for K quads; see visloc.markers.refine.refine_quads."},
     {NULL, NULL, 0, NULL},
 };

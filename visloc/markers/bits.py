@@ -4,16 +4,20 @@ Report Appendix G (Figure G.1.G): "direct sampling the interior of the perspecti
 square, such that we obtain a set (matrix) of ones and zeros ... the set is compared with the
 database in four orientations."
 
-Each cell's mean grey level is sampled at a 3 x 3 grid in its central part, through the
+Each cell is sampled at a small grid of points in its central part (3 x 3 for the cheap first
+look, 4 x 4 spread over the inner 60 % of the cell for the final read), through the
 homography of the four corners. The threshold is per marker: Otsu's split of the cell means
 together with a ring of cells sampled in the white margin around the marker, so a marker whose
-bits are mostly black still has a white class. All functions work on a batch of K candidates
-at once (one OpenCV remap per frame).
+bits are mostly black still has a white class. A cell's bit is the majority of its samples
+(the fraction of white samples, as OpenCV counts the white pixels of each cell), so a stain,
+a reflection or a printing flaw over part of a cell does not flip it. All functions work on a
+batch of K candidates at once (one OpenCV remap per frame).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -21,9 +25,7 @@ from numpy.typing import NDArray
 
 from visloc.markers.dictionary import Dictionary
 
-__all__ = ["CellSample", "decode", "otsu_threshold", "read_bits", "sample_cells", "square_to_quad"]
-
-_SUB = np.array([0.3, 0.5, 0.7])  # sub-sample positions inside a cell, in cell units
+__all__ = ["BitRead", "CellSample", "decode", "otsu_threshold", "read_bits", "sample_cells", "square_to_quad"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -37,10 +39,13 @@ class CellSample:
         runs from corner 0 to corner 1, column 0 from corner 0 to corner 3.
     ring : ndarray (K, 4n + 4) float
         Mean grey level of the cells of the ring just outside the border (the white margin).
+    samples : ndarray (K, n, n, S) float32 or None
+        The S grey levels sampled inside each cell (their mean is ``cells``).
     """
 
     cells: NDArray[np.float64]
     ring: NDArray[np.float64]
+    samples: NDArray[np.float32] | None = None
 
 
 def square_to_quad(quads: NDArray) -> NDArray[np.float64]:
@@ -68,26 +73,33 @@ def square_to_quad(quads: NDArray) -> NDArray[np.float64]:
     return H
 
 
-def _unit_grid(n: int) -> NDArray[np.float64]:
-    """Sample points (9 (n^2 + 4n + 4), 2) in unit-square coordinates: 9 per cell for the n x n
-    cells, then 9 per cell for the ring of cells around them."""
+def _sub_positions(per_side: int) -> NDArray[np.float64]:
+    """Sample positions across a cell, in cell units: 0.2 apart around its centre (0.3, 0.5,
+    0.7 for 3; 0.2 ... 0.8 for 4)."""
+    return 0.5 + 0.2 * (np.arange(per_side) - 0.5 * (per_side - 1))
+
+
+def _unit_grid(n: int, per_side: int) -> NDArray[np.float64]:
+    """Sample points (S (n^2 + 4n + 4), 2) in unit-square coordinates, S = per_side^2 per cell:
+    the n x n cells, then the ring of cells around them."""
     ii, jj = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
     cells = [np.stack([ii.ravel(), jj.ravel()], axis=1)]
     ring = [(-1, j) for j in range(-1, n + 1)] + [(n, j) for j in range(-1, n + 1)]
     ring += [(i, -1) for i in range(n)] + [(i, n) for i in range(n)]
     cells.append(np.array(ring))
     rc = np.concatenate(cells).astype(np.float64)
-    sy, sx = np.meshgrid(_SUB, _SUB, indexing="ij")
+    sub = _sub_positions(per_side)
+    sy, sx = np.meshgrid(sub, sub, indexing="ij")
     x = rc[:, 1:2] + sx.ravel()[None, :]  # column + sub-position
     y = rc[:, 0:1] + sy.ravel()[None, :]  # row + sub-position
     return np.stack([x.ravel(), y.ravel()], axis=1) / n
 
 
-_GRIDS: dict[int, NDArray[np.float32]] = {}  # (3, S) sample points u, v, 1 per cell count
+_GRIDS: dict[tuple[int, int], NDArray[np.float32]] = {}  # (3, P) points u, v, 1 per (n, per_side)
 
 
-def sample_cells(gray: NDArray[np.uint8], quads: NDArray, n: int) -> CellSample:
-    """Mean grey level of each of the ``n x n`` cells of each quad and of the ring around it.
+def sample_cells(gray: NDArray[np.uint8], quads: NDArray, n: int, *, per_side: int = 3) -> CellSample:
+    """Grey levels of each of the ``n x n`` cells of each quad and of the ring around it.
 
     Parameters
     ----------
@@ -97,20 +109,24 @@ def sample_cells(gray: NDArray[np.uint8], quads: NDArray, n: int) -> CellSample:
         outer corners of the cell area (pixel-centre convention: a pixel's area is
         ``[x - 0.5, x + 0.5]``).
     n : int
-        Cells per side including the black border (bits per side + 2).
+        Cells per side including the black border (bits per side + 2 x border cells).
+    per_side : int
+        Samples across each cell (``per_side ** 2`` per cell, 0.2 cell apart).
     """
     q = np.asarray(quads, np.float64).reshape(-1, 4, 2)
+    m = per_side * per_side
     if len(q) == 0:
-        return CellSample(np.zeros((0, n, n)), np.zeros((0, 4 * n + 4)))
-    if n not in _GRIDS:
-        uv = _unit_grid(n)
-        _GRIDS[n] = np.vstack([uv.T, np.ones(len(uv))]).astype(np.float32)
-    uv1 = _GRIDS[n]  # (3, S): u, v, 1
+        return CellSample(np.zeros((0, n, n)), np.zeros((0, 4 * n + 4)), np.zeros((0, n, n, m), np.float32))
+    if (n, per_side) not in _GRIDS:
+        uv = _unit_grid(n, per_side)
+        _GRIDS[n, per_side] = np.vstack([uv.T, np.ones(len(uv))]).astype(np.float32)
+    uv1 = _GRIDS[n, per_side]  # (3, P): u, v, 1
     hom = (square_to_quad(q).reshape(-1, 3).astype(np.float32) @ uv1).reshape(len(q), 3, -1)  # (K, 3, S)
     mx, my = hom[:, 0] / hom[:, 2], hom[:, 1] / hom[:, 2]
-    vals = cv2.remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    vals = vals.reshape(len(q), -1, 9).sum(axis=2, dtype=np.float64) / 9.0
-    return CellSample(vals[:, : n * n].reshape(-1, n, n), vals[:, n * n :])
+    raw = cv2.remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).reshape(len(q), -1, m)
+    vals = raw.sum(axis=2, dtype=np.float64) / m
+    samples = raw[:, : n * n].reshape(len(q), n, n, m).astype(np.float32)
+    return CellSample(vals[:, : n * n].reshape(-1, n, n), vals[:, n * n :], samples)
 
 
 def otsu_threshold(values: NDArray) -> tuple[NDArray, NDArray, NDArray]:
@@ -131,35 +147,69 @@ def otsu_threshold(values: NDArray) -> tuple[NDArray, NDArray, NDArray]:
     return 0.5 * (dark + bright), dark, bright
 
 
-def read_bits(
-    sample: CellSample, border_error_rate: float = 0.35, min_contrast: float = 10.0
-) -> tuple[NDArray[np.bool_], NDArray[np.uint8], NDArray, NDArray]:
-    """Threshold the cells into bits and check the black border.
+class BitRead(NamedTuple):
+    """What :func:`read_bits` read from K candidates.
 
-    Returns
-    -------
+    Attributes
+    ----------
     valid : ndarray (K,) bool
-        Contrast at least ``min_contrast`` and at most ``border_error_rate * (n-2)^2`` white
+        Contrast at least ``min_contrast`` and at most ``border_error_rate * bits^2`` white
         border cells (OpenCV's rule).
-    bits : ndarray (K, n-2, n-2) uint8
+    bits : ndarray (K, s, s) uint8
         Inner cells, 1 = white.
     margin : ndarray (K,)
-        Smallest distance of an inner cell from the threshold over half the contrast, in [0, 1].
+        Smallest distance of an inner cell's mean from the threshold over half the contrast,
+        in [0, 1].
     contrast : ndarray (K,)
         Bright class mean minus dark class mean, grey levels.
+    white_fraction : ndarray (K, s, s)
+        Fraction of each inner cell's samples above the threshold.
+    """
+
+    valid: NDArray[np.bool_]
+    bits: NDArray[np.uint8]
+    margin: NDArray
+    contrast: NDArray
+    white_fraction: NDArray
+
+
+def read_bits(
+    sample: CellSample, border_error_rate: float = 0.35, min_contrast: float = 10.0, *, border: int = 1
+) -> BitRead:
+    """Threshold the cells into bits and check the black border.
+
+    A cell is white when most of its samples are above the marker's threshold (its mean
+    decides a tie; without samples, its mean alone).
+
+    Parameters
+    ----------
+    sample : CellSample
+    border_error_rate : float
+        Tolerated white border cells as a fraction of the bit count.
+    min_contrast : float
+        Least difference between the white and black class means, grey levels.
+    border : int
+        Width of the black border in cells (OpenCV's ``markerBorderBits``).
     """
     cells = sample.cells
     k, n, _ = cells.shape
     thr, dark, bright = otsu_threshold(np.concatenate([cells.reshape(k, -1), sample.ring], axis=1))
     contrast = bright - dark
-    white = cells > thr[:, None, None]
-    border = np.ones((n, n), bool)
-    border[1:-1, 1:-1] = False
-    border_white = white[:, border].sum(axis=1)
-    valid = (contrast >= min_contrast) & (border_white <= int(border_error_rate * (n - 2) ** 2))
-    inner = cells[:, 1:-1, 1:-1]
-    margin = np.abs(inner - thr[:, None, None]).reshape(k, -1).min(axis=1) / np.maximum(0.5 * contrast, 1e-6)
-    return valid, white[:, 1:-1, 1:-1].astype(np.uint8), np.minimum(margin, 1.0), contrast
+    t = thr[:, None, None]
+    if sample.samples is not None and sample.samples.shape[-1] > 1:
+        fraction = (sample.samples > t[..., None]).mean(axis=-1)
+        white = np.where(fraction == 0.5, cells > t, fraction > 0.5)
+    else:
+        white = cells > t
+        fraction = white.astype(np.float64)
+    frame = np.ones((n, n), bool)
+    frame[border:-border, border:-border] = False
+    border_white = white[:, frame].sum(axis=1)
+    size = n - 2 * border
+    valid = (contrast >= min_contrast) & (border_white <= int(border_error_rate * size**2))
+    inner = (slice(None), slice(border, -border), slice(border, -border))
+    margin = np.abs(cells[inner] - t).reshape(k, -1).min(axis=1) / np.maximum(0.5 * contrast, 1e-6)
+    return BitRead(valid, white[inner].astype(np.uint8), np.minimum(margin, 1.0), contrast, fraction[inner])
 
 
 def decode(

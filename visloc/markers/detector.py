@@ -8,13 +8,18 @@ One frame's path:
    6. radial-peak corner split, 7. line fits -> candidate quads in full-resolution pixels;
 8. sub-pixel edge refinement of all candidates on the full-resolution grey image (batched;
    candidates whose cells show no black border or no contrast are dropped first, cheaply);
-9. bit sampling with a per-marker threshold and the black-border check (batched);
+9. bit sampling with a per-marker threshold (each cell's bit the majority of its samples)
+   and the black-border check (batched);
 10. dictionary match in four orientations, corners rotated so corner 0 is the marker's own
     top-left; duplicates (one marker found twice) merged.
 
 Several passes combine what one threshold window cannot do alone: a fine window at full
 resolution closes the thin borders of small or oblique markers, a coarse window on a shrunk
 image closes the borders of large, blurred ones, at a quarter of the cost.
+
+White-on-black markers (``inverted=True``) are black-on-white markers of the inverted image;
+stage 8 then reads the inverted grey levels through the matching response. ``"both"`` runs
+the whole path twice, once per polarity.
 """
 
 from __future__ import annotations
@@ -41,6 +46,7 @@ from visloc.markers.corners import _NEXT, RadialSplit
 from visloc.markers.corners_batch import fit_quads
 from visloc.markers.dictionary import Dictionary, load_dictionary
 from visloc.markers.refine import refine_quads
+from visloc.markers.response import response_lut
 from visloc.types import MarkerDetection
 
 _FOUR = np.arange(4)
@@ -60,10 +66,13 @@ class SearchPass:
     window : int or None
         Adaptive-threshold window in pixels of the shrunk image (odd, >= 3); ``None`` picks
         :func:`visloc.markers.binarize.default_window` of the shrunk image.
+    offset : float or None
+        Stage 3 threshold offset of this pass, grey levels; ``None``: the detector's ``offset``.
     """
 
     scale: float = 1.0
     window: int | None = None
+    offset: float | None = None
 
 
 #: Search passes trading recall on the smallest markers for speed: the fine pass on an image
@@ -103,13 +112,24 @@ class DetectorParams:
         Stage 8 profiles across each side (more average more noise away).
     refine_iterations : int
         Stage 8 passes.
+    border_bits : int
+        Width of the markers' black border in cells, 1 to 3 (OpenCV's ``markerBorderBits``).
+    inverted : bool or "both"
+        ``False``: black markers on white; ``True``: white markers on black only (OpenCV's
+        ``detectInvertedMarker`` finds both; that is ``"both"`` here, at twice the cost).
+    response : {"srgb", "linear"} or float
+        Stage 8: how the image's grey levels encode light
+        (:func:`visloc.markers.response.response_lut`). The default ``"srgb"`` is what cameras
+        and most image files use; ``"linear"`` is for linear sensor data and linear renders
+        (:func:`visloc.synth.render_markers` without a camera model). Edges are measured in
+        linear light, so the wrong choice biases corners by a fraction of the blur width.
     border_error_rate : float
         Stage 9: tolerated white border cells, as a fraction of the bit count (OpenCV: 0.35).
     error_correction_rate : float
         Stage 10: fraction of the dictionary's correction capacity used (OpenCV: 0.6).
     """
 
-    passes: tuple[SearchPass, ...] = (SearchPass(1.0, 9), SearchPass(2.0, 9))
+    passes: tuple[SearchPass, ...] = (SearchPass(1.0, 9), SearchPass(2.0, 9), SearchPass(4.0, 9, 4.0))
     base_height: int = 540
     blur_sigma: float = 0.6
     offset: float = 7.0
@@ -121,6 +141,9 @@ class DetectorParams:
     refine_iterations: int = 2
     refine_max_radius: int = 5
     refine_profiles: int = 24
+    response: str | float = "srgb"
+    border_bits: int = 1
+    inverted: bool | str = False
     border_error_rate: float = 0.35
     error_correction_rate: float = 0.6
 
@@ -243,6 +266,14 @@ class MarkerDetector:
         self.params = replace(DetectorParams(), **params)  # type: ignore[arg-type]
         if not self.params.passes:
             raise ValueError("passes: at least one search pass is needed")
+        lut = response_lut(self.params.response)  # a clear error now rather than at the first frame
+        # the inverted image's grey level v holds the light 255 - lut[255 - v] of the original
+        self._luts = {False: lut, True: 255.0 - lut[::-1]}
+        bb = self.params.border_bits
+        if isinstance(bb, bool) or not isinstance(bb, (int, np.integer)) or not 1 <= bb <= 3:
+            raise ValueError(f"border_bits must be 1, 2 or 3, got {bb!r}")
+        if self.params.inverted not in (False, True, "both") or not isinstance(self.params.inverted, (bool, str)):
+            raise ValueError(f"inverted must be False, True or 'both', got {self.params.inverted!r}")
 
     def __repr__(self) -> str:
         return f"MarkerDetector({self.dictionary.name!r}, {self.params})"
@@ -276,10 +307,12 @@ class MarkerDetector:
         work, scale = self._work_image(gray, sp.scale * base)
         window = sp.window if sp.window is not None else default_window(work.shape)
         # a marker needs at least about 1 px per cell to be decoded: smaller ones are not looked at
-        min_side = max(p.candidates.min_side, (self.dictionary.marker_size + 2) / scale.max())
-        candidates = replace(p.candidates, min_side=min_side)
+        min_side = max(p.candidates.min_side, (self.dictionary.marker_size + 2 * p.border_bits) / scale.max())
+        # the image-border margin is in full-resolution pixels whatever the pass's scale
+        candidates = replace(p.candidates, min_side=min_side,
+                             border_distance=p.candidates.border_distance / scale.max())
         blurred = blur(work, p.blur_sigma)  # stage 2
-        binary = threshold(blurred, window=window, offset=p.offset)  # stage 3
+        binary = threshold(blurred, window=window, offset=p.offset if sp.offset is None else sp.offset)  # stage 3
         # stage 4: a marker's frame encloses its white cells, so ink without a hole is no marker
         contours = enclosing_borders(binary, *perimeter_bounds(work.shape, candidates))
         return _PassImage(work.shape, scale, window, candidates, blurred, binary, contours)
@@ -321,12 +354,21 @@ class MarkerDetector:
         return filter_candidates(contours, found.shape, found.candidates)  # 5
 
     def _run(self, image: NDArray[np.uint8], log: dict | None) -> list[MarkerDetection]:
-        p = self.params
         gray = to_gray(image)  # stage 1
         if log is not None:
             log["gray"] = gray
+        polarity = self.params.inverted
+        if polarity == "both":  # the trace shows the black-on-white search
+            dets = self._detect(gray, False, log) + self._detect(cv2.bitwise_not(gray), True, None)
+            return sorted(dets, key=lambda d: (d.id, d.corners[0, 1], d.corners[0, 0]))
+        return self._detect(cv2.bitwise_not(gray) if polarity else gray, bool(polarity), log)
+
+    def _detect(self, gray: NDArray[np.uint8], inverted: bool, log: dict | None) -> list[MarkerDetection]:
+        """Stages 2-10 on a grey image in which the markers are black on white."""
+        p = self.params
         base = max(1.0, min(gray.shape[:2]) / p.base_height)
-        n_cells = self.dictionary.marker_size + 2
+        bb = p.border_bits
+        n_cells = self.dictionary.marker_size + 2 * bb
         slack = int(self.dictionary.max_correction * p.error_correction_rate) + 1  # +1: lenient
         lo_white, hi_white = self.dictionary.white_range
         lo_white, hi_white = lo_white - slack, hi_white + slack
@@ -349,7 +391,7 @@ class MarkerDetector:
             # candidates (and the black cells inside markers) end here, before they cost a
             # corner fit and an edge refinement: no black border, no contrast, or too few or
             # too many white bits for any marker of the dictionary
-            valid, bits = read_bits(sample_cells(gray, approx[fresh], n_cells), 0.5)[:2]
+            valid, bits = read_bits(sample_cells(gray, approx[fresh], n_cells), 0.5, border=bb)[:2]
             white = bits.reshape(len(bits), -1).sum(axis=1)
             looks = valid & (white >= lo_white) & (white <= hi_white)
             if log is not None:
@@ -377,26 +419,47 @@ class MarkerDetector:
             side = np.sqrt(np.abs(_areas(quads)))
             radii = p.refine_radius or np.clip(np.round(0.4 * side / n_cells), 1, p.refine_max_radius).astype(int)
             corners, refined = refine_quads(gray, quads, radius=radii, iterations=p.refine_iterations,
-                                            count=p.refine_profiles)
-        cells = sample_cells(gray, corners, n_cells)  # stage 9, batched
-        valid, bits, margin, contrast = read_bits(cells, p.border_error_rate)
+                                            count=p.refine_profiles, response=self._luts[inverted])
+        cells = sample_cells(gray, corners, n_cells, per_side=4)  # stage 9, batched
+        valid, bits, margin, contrast, fraction = read_bits(cells, p.border_error_rate, border=bb)
         ids, shift, hamming, matched = decode(bits, self.dictionary, p.error_correction_rate)  # 10
+        # a small or steeply tilted marker (about a pixel per cell) can read differently through
+        # the stage-7 corners: where the refined read fails, that read gets its chance (and a
+        # refinement that spoilt the read is not trusted)
+        retry = np.flatnonzero(refined & ~(valid & matched))
+        if len(retry):
+            again = sample_cells(gray, quads[retry], n_cells, per_side=4)
+            read = read_bits(again, p.border_error_rate, border=bb)
+            dec = decode(read.bits, self.dictionary, p.error_correction_rate)
+            won = retry[read.valid & dec[3]]
+            if len(won):
+                pick = read.valid & dec[3]
+                cells = CellSample(cells.cells.copy(), cells.ring.copy(), cells.samples.copy())
+                cells.cells[won], cells.ring[won], cells.samples[won] = (again.cells[pick], again.ring[pick],
+                                                                         again.samples[pick])
+                for arr, new in zip((valid, bits, margin, contrast, fraction), read, strict=True):
+                    arr[won] = new[pick]
+                for arr, new in zip((ids, shift, hamming, matched), dec, strict=True):
+                    arr[won] = new[pick]
+                corners[won], refined[won] = quads[won], False  # the read vouches for those corners
         accept = valid & matched
+        confidence = _confidence(fraction, self.dictionary.bits[ids], shift).tolist()
         # each accepted quad from the marker's own top-left corner, and its area (all at once)
         order = (_FOUR[None, :] + shift[:, None]) % 4
         rolled = corners[np.arange(len(corners))[:, None], order]
         areas = np.abs(_areas(rolled)).tolist()
         found: list[tuple[MarkerDetection, float]] = []
         rows = zip(ids.tolist(), hamming.tolist(), margin.tolist(), shift.tolist(), contrast.tolist(),
-                   refined.tolist(), strict=True)
-        for i, (mid, ham, mar, rot, con, ref) in enumerate(rows):
+                   refined.tolist(), confidence, strict=True)
+        for i, (mid, ham, mar, rot, con, ref, conf) in enumerate(rows):
             cell_i = CellSample(cells.cells[i : i + 1], cells.ring[i : i + 1]) if log is not None else None
             if not accept[i]:
                 if log is not None:
                     stage, b = ("bits", None) if not valid[i] else ("dictionary", bits[i])
                     _note(log, cands.contours[i], cands.scales[i], cands.splits[i], quads[i], cell_i, b, None, stage)
                 continue
-            det = MarkerDetection(int(mid), rolled[i], int(ham), float(mar), int(rot), float(con), bool(ref))
+            det = MarkerDetection(int(mid), rolled[i], int(ham), float(mar), int(rot), float(con), bool(ref), conf,
+                                  inverted)
             found.append((det, areas[i]))
             _note(log, cands.contours[i], cands.scales[i], cands.splits[i], quads[i], cell_i, bits[i], det, "accepted")
         dets = _merge_duplicates(found)
@@ -414,12 +477,30 @@ def _as_pass(p: object) -> SearchPass:
         raise ValueError(f"passes: scale must be >= 1, got {sp.scale}")
     if sp.window is not None and (sp.window < 3 or sp.window % 2 == 0):
         raise ValueError(f"passes: window must be an odd integer >= 3, got {sp.window}")
-    return SearchPass(float(sp.scale), None if sp.window is None else int(sp.window))
+    if sp.offset is not None and not np.isfinite(sp.offset):
+        raise ValueError(f"passes: offset must be a finite number, got {sp.offset}")
+    return SearchPass(float(sp.scale), None if sp.window is None else int(sp.window),
+                      None if sp.offset is None else float(sp.offset))
 
 
 def _note(log: dict | None, contour, scale, split, quad, cells, bits, det, stage: str) -> None:
     if log is not None:
         log["candidates"].append(CandidateTrace(contour, scale, split, quad, cells, bits, det, stage))
+
+
+def _confidence(fraction: NDArray, codes: NDArray, shift: NDArray) -> NDArray:
+    """Bit certainty (K,) in [0, 1] of each candidate's read against its decoded code: the
+    mean over its cells of ``2 f - 1`` where the code has white, ``1 - 2 f`` where it has
+    black (``f``: the cell's white fraction), clipped at 0. ``codes`` (K, s, s) are the
+    decoded ids' bits in the marker's own orientation, ``shift`` :func:`decode`'s corner shift."""
+    seen = np.empty_like(codes)
+    turns = (4 - shift) % 4  # decode: observed = rot90(true, turns)
+    for r in range(4):
+        pick = turns == r
+        if pick.any():
+            seen[pick] = np.rot90(codes[pick], r, axes=(1, 2))
+    agree = np.where(seen == 1, 2 * fraction - 1, 1 - 2 * fraction)
+    return np.clip(agree.reshape(len(agree), -1).mean(axis=1), 0.0, 1.0)
 
 
 def _clockwise(quads: NDArray) -> NDArray:

@@ -8,6 +8,9 @@ across the side, the edge position is found from the *area* of the intensity ste
 
 which is exact for an ideal step integrated over pixels and stays unbiased under any
 symmetric blur once the window is centred on the edge (the refinement iterates to centre it).
+Blur mixes *light*, so the step is measured in linear intensity: grey levels are read through
+the camera's response (:mod:`visloc.markers.response`; sRGB by default, as cameras write
+8-bit images), which removes a bias of a fraction of the blur width on every side.
 A total-least-squares line through the edge points of each side, with outliers dropped, gives
 the side; the corners are the intersections of consecutive sides. Quads are refined in
 batches (one OpenCV remap per pass for all markers of a frame).
@@ -28,6 +31,7 @@ from numpy.typing import NDArray
 
 from visloc._compiled import use_compiled
 from visloc.markers.corners import _NEXT, fit_lines, quad_from_lines
+from visloc.markers.response import response_lut
 
 try:
     from visloc.markers import _refine
@@ -38,6 +42,7 @@ except ImportError:  # installed without a C compiler: the numpy version below
 NATIVE_REFINE = _refine is not None
 
 _END_GAP = 0.15  # fraction of each side left out at both ends (sample_edge_profiles)
+_LEVELS = np.arange(256, dtype=np.float64)
 
 __all__ = ["NATIVE_REFINE", "edge_offsets", "refine_quads", "sample_edge_profiles"]
 
@@ -58,13 +63,13 @@ def _profile_grid(count: int, end_gap: float, radius: int) -> tuple[NDArray[np.f
 
 
 def sample_edge_profiles(
-    gray: NDArray[np.uint8], quads: NDArray, radius: int, count: int = 24, end_gap: float = 0.15
+    gray: NDArray, quads: NDArray, radius: int, count: int = 24, end_gap: float = 0.15
 ) -> tuple[NDArray, NDArray, NDArray]:
     """Sample grey levels along normals across the four sides of each quad.
 
     Parameters
     ----------
-    gray : ndarray (H, W) uint8
+    gray : ndarray (H, W) uint8 or float32
     quads : ndarray (K, 4, 2)
         Corners clockwise in the image.
     radius : int
@@ -118,6 +123,7 @@ def refine_quads(
     radius: int | NDArray = 2,
     iterations: int = 2,
     count: int = 24,
+    response: str | float | NDArray = "srgb",
     native: bool | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """Refine the corners of dark squares on a bright surround to sub-pixel accuracy.
@@ -135,6 +141,10 @@ def refine_quads(
         Passes; each re-centres the profiles on the previous pass's lines.
     count : int
         Profiles per side.
+    response : {"srgb", "linear"}, float or ndarray (256,)
+        How grey levels encode light (:func:`visloc.markers.response.response_lut`): the
+        edges are measured in linear intensity. ``"srgb"`` suits camera images and most
+        files, ``"linear"`` linear sensor data and linear renders.
     native : bool or None
         Run the compiled version (``True``) or the numpy one (``False``); ``None``: the
         compiled one when it was built (:data:`NATIVE_REFINE`).
@@ -144,10 +154,11 @@ def refine_quads(
     corners : ndarray (K, 4, 2)
         Refined corners in the same order (the input where refinement failed).
     ok : ndarray (K,) bool
-        False where a side had too little contrast or too few clean profiles.
+        False where a side had too little contrast (4 grey levels) or too few clean profiles.
     """
     if gray.ndim != 2 or gray.dtype != np.uint8:
         raise ValueError(f"gray must be a (H, W) uint8 image, got {gray.shape} {gray.dtype}")
+    lut = response_lut(response)
     q0 = np.asarray(quads, np.float64).reshape(-1, 4, 2)
     q = q0.copy()
     k = len(q)
@@ -161,8 +172,10 @@ def refine_quads(
     if use_compiled(native, _refine, "visloc.markers._refine"):
         g = np.ascontiguousarray(gray)
         raw, raw_ok = _refine.refine_quads(g, g.shape[0], g.shape[1], np.ascontiguousarray(q0),
-                                           np.ascontiguousarray(r, np.int64), int(iterations), int(count), _END_GAP)
+                                           np.ascontiguousarray(r, np.int64), int(iterations), int(count), _END_GAP,
+                                           lut)
         return np.frombuffer(raw, np.float64).reshape(k, 4, 2).copy(), np.frombuffer(raw_ok, np.uint8).astype(bool)
+    light = gray if isinstance(response, str) and response == "linear" else lut.astype(np.float32)[gray]
     big = int(r.max())
     inside = (np.abs(np.arange(-big, big + 1))[None, :] <= r[:, None]).astype(np.float32)[:, None, None, :]
     kk = np.arange(k)
@@ -171,7 +184,7 @@ def refine_quads(
     ok_all = np.ones(k, bool)
     half = 2 * count  # median of the 4 * count inner (outer) end samples of each quad
     for it in range(iterations):
-        base, normals, prof = sample_edge_profiles(gray, q, big, count, _END_GAP)
+        base, normals, prof = sample_edge_profiles(light, q, big, count, _END_GAP)
         p_in = prof[kk, :, :, big - r]  # (K, 4, M): each quad's innermost sample
         p_out = prof[kk, :, :, big + r]
         lo = np.partition(p_in.reshape(k, -1), half, axis=1)[:, half]
@@ -197,7 +210,8 @@ def refine_quads(
         lines[flip] *= -1
         new = quad_from_lines(lines)
         move = np.abs(new - q).max(axis=(1, 2))  # NaN where two sides came out parallel
-        ok_all &= (hi - lo >= 4.0) & (w.reshape(k, 4, count).sum(axis=2) >= 3).all(axis=1)
+        grey_span = np.interp(hi, lut, _LEVELS) - np.interp(lo, lut, _LEVELS)  # contrast in grey levels
+        ok_all &= (grey_span >= 4.0) & (w.reshape(k, 4, count).sum(axis=2) >= 3).all(axis=1)
         ok_all &= move <= max_move  # False for NaN too
         q[ok_all] = new[ok_all]
     q[~ok_all] = q0[~ok_all]

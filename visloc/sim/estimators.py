@@ -92,7 +92,7 @@ class VisionEstimator:
             raise TypeError(f"camera: expected BottomCamera, got {type(camera).__name__}")
         s = as_array(initial_state, "initial_state", (12,))
         self.camera = camera
-        self.detector = MarkerDetector(camera.dictionary)
+        self.detector = MarkerDetector(camera.dictionary, response="linear")  # the floor renders are linear
         self.intrinsics = Camera(camera.K)
         self.g = check_real(g, "g", positive=True)
         self.attitude_gain = check_real(attitude_gain, "attitude_gain", positive=True)

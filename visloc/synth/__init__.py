@@ -7,8 +7,21 @@ them to disk with ``ground_truth.json`` and an OpenCV ``camera.yml``.
 Flights: :func:`render_flight` renders a downward-looking camera flying a
 :func:`flight_trajectory` (or :func:`straight_track`) over textured ground, with exact
 velocity and yaw-rate ground truth (:class:`FlightTrack`); :func:`write_flight` writes it.
+
+Camera model: :class:`CameraEffects` and :func:`apply_camera` turn an ideal linear-light
+render into a camera-like frame (lens distortion, blur, vignetting, shot and read noise, sRGB,
+JPEG); ``render_markers(..., camera=...)`` and ``random_scene(..., camera=True)`` use it, with
+ground truth from :func:`distort_points`.
 """
 
+from visloc.synth.camera import (
+    CameraEffects,
+    apply_camera,
+    distort_points,
+    ideal_window,
+    srgb_decode,
+    srgb_encode,
+)
 from visloc.synth.datasets import render_dataset, render_video, write_camera_yml
 from visloc.synth.flight import (
     Flight,
@@ -28,20 +41,31 @@ from visloc.synth.markers import (
     render_markers,
 )
 from visloc.synth.raster import polygon_coverage
-from visloc.synth.scenes import DIFFICULTIES, MARKER_LENGTH, default_camera, random_scene
+from visloc.synth.scenes import (
+    DARK_EXPOSURE,
+    DIFFICULTIES,
+    MARKER_LENGTH,
+    default_camera,
+    random_scene,
+)
 from visloc.synth.textures import TEXTURES
 
 __all__ = [
+    "DARK_EXPOSURE",
     "DIFFICULTIES",
     "MARKER_LENGTH",
     "TEXTURES",
+    "CameraEffects",
     "Flight",
     "FlightTrack",
     "ImuStream",
     "MarkerRender",
     "RenderedMarker",
+    "apply_camera",
     "default_camera",
+    "distort_points",
     "flight_trajectory",
+    "ideal_window",
     "imu_stream",
     "marker_object_points",
     "polygon_coverage",
@@ -52,6 +76,8 @@ __all__ = [
     "render_ground_view",
     "render_markers",
     "render_video",
+    "srgb_decode",
+    "srgb_encode",
     "straight_track",
     "write_camera_yml",
     "write_flight",

@@ -27,16 +27,23 @@ from visloc.types import Pose
 
 FloatArray = NDArray[np.float64]
 
+#: Lens distortion ``(k1, k2)`` of the camera-like frames of :func:`render_dataset` (a webcam's
+#: mild barrel distortion, :class:`~visloc.synth.camera.CameraEffects`' default).
+DATASET_LENS = (-0.05, 0.0)
 
-def write_camera_yml(path: str | Path, K: FloatArray, size: tuple[int, int]) -> Path:
-    """Write an OpenCV FileStorage YAML camera file (zero distortion) and return its path."""
+
+def write_camera_yml(path: str | Path, K: FloatArray, size: tuple[int, int],
+                     dist: FloatArray | None = None) -> Path:
+    """Write an OpenCV FileStorage YAML camera file (``dist``: OpenCV distortion
+    coefficients, zero when ``None``) and return its path."""
     path = Path(path)
     fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
     try:
         fs.write("image_width", int(size[0]))
         fs.write("image_height", int(size[1]))
         fs.write("camera_matrix", np.asarray(K, np.float64))
-        fs.write("distortion_coefficients", np.zeros((1, 5)))
+        coeffs = np.zeros(5) if dist is None else np.asarray(dist, np.float64).ravel()
+        fs.write("distortion_coefficients", coeffs.reshape(1, -1))
     finally:
         fs.release()
     return path
@@ -72,12 +79,15 @@ def render_dataset(
     size: tuple[int, int] = (640, 480),
     dictionary: str | Dictionary = "DICT_4X4_50",
     difficulty: str = "easy",
+    camera: bool = True,
     progress: Callable[[int], object] | None = None,
 ) -> Path:
     """Render ``n`` random scenes to ``outdir`` with ground truth and a camera file.
 
     Frame ``i`` is ``random_scene(np.random.default_rng([seed, i]), ...)``, so it does not
-    depend on ``n``.
+    depend on ``n``. With ``camera`` (the default) the frames are camera-like (random
+    :class:`~visloc.synth.camera.CameraEffects` per frame, sRGB-encoded) through one lens,
+    :data:`DATASET_LENS`, which ``camera.yml`` records; without, they are linear renders.
 
     Parameters
     ----------
@@ -89,6 +99,8 @@ def render_dataset(
         Seed of the dataset.
     size, dictionary, difficulty
         As in :func:`random_scene`.
+    camera : bool
+        Camera-like frames (``True``) or linear renders.
     progress : callable or None
         Called as ``progress(i)`` after frame ``i`` is written.
 
@@ -114,7 +126,7 @@ def render_dataset(
     frames = []
     for i in range(n):
         render = random_scene(np.random.default_rng([seed, i]), size=(w, h), dictionary=dic,
-                              difficulty=difficulty)
+                              difficulty=difficulty, camera=camera, lens=DATASET_LENS if camera else None)
         name = f"frame_{i:04d}.png"
         if not cv2.imwrite(str(out / name), render.image):
             raise OSError(f"could not write {out / name}")
@@ -122,8 +134,11 @@ def render_dataset(
         if progress is not None:
             progress(i)
     gt["frames"] = frames
+    dist = np.array([*DATASET_LENS, 0.0, 0.0, 0.0]) if camera else np.zeros(5)
+    gt["camera"]["dist"] = dist.tolist()
+    gt["camera_like"] = bool(camera)
     (out / "ground_truth.json").write_text(json.dumps(gt, indent=1))
-    write_camera_yml(out / "camera.yml", K, (w, h))
+    write_camera_yml(out / "camera.yml", K, (w, h), dist)
     return out
 
 

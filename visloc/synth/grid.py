@@ -9,6 +9,7 @@ from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from visloc.pose.maps import MarkerMap
+from visloc.synth.camera import CameraEffects
 from visloc.synth.markers import MarkerRender, render_markers
 from visloc.types import Pose
 
@@ -68,6 +69,12 @@ def random_map_view(rng: np.random.Generator, marker_map: MarkerMap, K: NDArray,
     R_map_cam = R_tilt @ Rotation.from_euler("z", yaw).as_matrix() @ LOOKING_DOWN
     T_cam_map = Pose(R_map_cam.T, -R_map_cam.T @ pos)
     return render_map_view(marker_map, K, size, T_cam_map, dictionary, rng=rng, **render_options)
+
+
+#: The camera of the flights ``visloc render localize`` and the demo render: a webcam's optics
+#: blur, sensor noise, vignetting and sRGB encoding, no JPEG, and no lens distortion (their
+#: camera file has none).
+FLIGHT_CAMERA = CameraEffects(blur_sigma=0.5, k1=0.0, jpeg_quality=None)
 
 
 @dataclass(frozen=True, eq=False)

@@ -13,6 +13,11 @@ exactly from the projected cell polygons (:mod:`visloc.synth.raster`), so the ed
 the ground truth says to ~1e-6 px; ``supersample=S`` instead point-samples S x S positions per
 pixel with :func:`cv2.warpPerspective` and averages them (edge error up to ``1 / (2 S)`` px),
 which serves as an independent cross-check.
+
+With ``camera=CameraEffects(...)`` the render is an ideal linear-light image passed through
+:func:`visloc.synth.camera.apply_camera` (lens distortion, blur, vignetting, sensor noise,
+sRGB encoding, JPEG); the ground-truth corners are then the distorted projections
+(:func:`visloc.synth.camera.distort_points`) and ``MarkerRender.dist`` holds the distortion.
 """
 
 from __future__ import annotations
@@ -26,6 +31,14 @@ from numpy.typing import NDArray
 
 from visloc.markers.dictionary import Dictionary, load_dictionary
 from visloc.synth._checks import check_camera, check_int, check_number, check_size
+from visloc.synth.camera import (
+    CameraEffects,
+    apply_camera,
+    distort_points,
+    ideal_window,
+    monotonic_radius,
+    srgb_decode,
+)
 from visloc.synth.raster import polygon_coverage
 from visloc.synth.textures import degrade, make_background
 from visloc.types import Pose
@@ -50,7 +63,8 @@ class RenderedMarker:
         Index of the marker in its dictionary.
     corners : ndarray (4, 2) float64
         Exact image corners of the black square, clockwise from the marker's own top-left
-        (OpenCV order), pixel centres at integer coordinates.
+        (OpenCV order), pixel centres at integer coordinates; with lens distortion, the
+        distorted projections.
     pose : Pose
         Marker-to-camera transform, ``p_cam = R @ p_marker + t``.
     length : float
@@ -89,11 +103,15 @@ class MarkerRender:
     markers : list of RenderedMarker
         Ground truth of every placement, in the order given (drawn or not).
     K : ndarray (3, 3)
-        Camera matrix (no distortion).
+        Camera matrix.
     dictionary : str
         Name of the marker dictionary.
     params : dict
-        The rendering options and degradations used (JSON-ready values).
+        The rendering options and degradations used (JSON-ready values); with a camera
+        model, ``params["camera"]`` holds its effects.
+    dist : ndarray (5,)
+        OpenCV distortion coefficients ``k1, k2, p1, p2, k3`` of the image (zeros unless
+        rendered with a camera model): ``K`` and ``dist`` are the image's OpenCV camera.
     """
 
     image: NDArray[np.uint8]
@@ -101,6 +119,7 @@ class MarkerRender:
     K: FloatArray
     dictionary: str
     params: dict = field(default_factory=dict)
+    dist: FloatArray = field(default_factory=lambda: np.zeros(5))
 
 
 def marker_object_points(length: float) -> FloatArray:
@@ -256,13 +275,14 @@ def render_markers(
     gradient: float = 0.0,
     jpeg_quality: int | None = None,
     rng: np.random.Generator | int | None = None,
+    camera: CameraEffects | None = None,
 ) -> MarkerRender:
     """Render markers seen by a pinhole camera, with exact ground-truth corners.
 
     Parameters
     ----------
     K : ndarray (3, 3)
-        Camera matrix; no lens distortion.
+        Camera matrix (the pinhole part of the camera).
     size : (int, int)
         ``(width, height)`` of the image.
     placements : list of (int, Pose, float)
@@ -297,11 +317,19 @@ def render_markers(
         JPEG round-trip quality in [1, 100], or ``None`` for none.
     rng : numpy.random.Generator, int or None
         Randomness for noise, gradient direction and textures (``np.random.default_rng(rng)``).
+    camera : CameraEffects or None
+        A camera model instead of the degradations above (which must then keep their
+        defaults): the markers and the background (its grey levels taken as sRGB-encoded and
+        decoded to linear light) form an ideal linear-light image, extended past the frame
+        as far as the lens distortion looks, which
+        :func:`visloc.synth.camera.apply_camera` turns into the frame. Ground-truth corners
+        and ``visible`` are then those of the distorted projections (and a corner must lie
+        where the distortion is still one-to-one).
 
     Returns
     -------
     MarkerRender
-        Image, per-placement ground truth, ``K`` and the parameters used.
+        Image, per-placement ground truth, ``K``, ``dist`` and the parameters used.
 
     Raises
     ------
@@ -326,12 +354,26 @@ def render_markers(
     if rng is not None and not isinstance(rng, (np.random.Generator, int, np.integer)):
         raise TypeError(f"rng must be a numpy Generator, an int seed or None, got {type(rng).__name__}")
     gen = np.random.default_rng(rng)
-
-    bg, bg_name = make_background(background, (w, h), gen)
+    if camera is not None:
+        _check_camera_effects(camera, blur_sigma=blur_sigma, motion_blur=motion_blur,
+                              motion_angle=motion_angle, noise_sigma=noise_sigma, gain=gain,
+                              gradient=gradient, jpeg_quality=jpeg_quality)
+        k1, k2 = camera.k1, camera.k2
+        left, top, right, bottom = ideal_window(k, k1, k2, (w, h))
+        bg, bg_name = _camera_background(background, (w, h), (left, top, right, bottom), gen)
+        k_ideal = k.copy()
+        k_ideal[:2, 2] += (left, top)
+    else:
+        bg, bg_name = make_background(background, (w, h), gen)
+        k_ideal = k
     markers = []
     for marker_id, pose, length in items:
         corners = project_points(k, pose, marker_object_points(length))
         in_front = bool(np.all(pose.apply(marker_object_points(length))[:, 2] > 0))
+        if camera is not None:
+            one_to_one = _within_radius(corners, k, monotonic_radius(k1, k2))
+            corners = distort_points(corners, k, k1, k2)
+            in_front = in_front and one_to_one
         inside = bool(
             np.all(np.isfinite(corners))
             and np.all(corners >= VISIBLE_MARGIN - 0.5)
@@ -346,19 +388,25 @@ def render_markers(
         canvas = bg
         for i in drawn:
             marker_id, pose, length = items[i]
-            _draw_exact(canvas, k, pose, dic.bits[marker_id], length, margin_cells)
+            _draw_exact(canvas, k_ideal, pose, dic.bits[marker_id], length, margin_cells)
     else:
         s = supersample
+        hc, wc = bg.shape
         canvas = np.repeat(np.repeat(bg.astype(np.float32), s, axis=0), s, axis=1)
         for i in drawn:
             marker_id, pose, length = items[i]
-            _draw_sampled(canvas, k, pose, dic.bits[marker_id], length, margin_cells, s)
-        canvas = canvas.reshape(h, s, w, s).astype(np.float64).mean(axis=(1, 3))
+            _draw_sampled(canvas, k_ideal, pose, dic.bits[marker_id], length, margin_cells, s)
+        canvas = canvas.reshape(hc, s, wc, s).astype(np.float64).mean(axis=(1, 3))
 
-    image, grad_angle = degrade(
-        canvas, gen, blur_sigma=blur_sigma, motion_blur=motion_blur, motion_angle=motion_angle,
-        gradient=gradient, gain=gain, noise_sigma=noise_sigma, jpeg_quality=jpeg_quality,
-    )
+    if camera is None:
+        image, grad_angle = degrade(
+            canvas, gen, blur_sigma=blur_sigma, motion_blur=motion_blur,
+            motion_angle=motion_angle, gradient=gradient, gain=gain, noise_sigma=noise_sigma,
+            jpeg_quality=jpeg_quality,
+        )
+    else:
+        image, camera_params = apply_camera(canvas, k, camera, gen, size=(w, h), ideal_K=k_ideal)
+        grad_angle = None
     params = {
         "background": bg_name,
         "supersample": supersample,
@@ -372,4 +420,50 @@ def render_markers(
         "gradient_angle": grad_angle,
         "jpeg_quality": jpeg_quality,
     }
-    return MarkerRender(image, markers, k, dic.name, params)
+    if camera is None:
+        return MarkerRender(image, markers, k, dic.name, params)
+    params["camera"] = camera_params
+    return MarkerRender(image, markers, k, dic.name, params, camera.dist)
+
+
+def _check_camera_effects(camera: object, **degradations: object) -> None:
+    """``camera`` must be a CameraEffects and the ``degrade`` options at their defaults."""
+    if not isinstance(camera, CameraEffects):
+        raise TypeError(f"camera must be a CameraEffects or None, got {type(camera).__name__}")
+    defaults = {"blur_sigma": 0.0, "motion_blur": 0.0, "motion_angle": 0.0, "noise_sigma": 0.0,
+                "gain": 1.0, "gradient": 0.0, "jpeg_quality": None}
+    changed = [f"{name}={value!r}" for name, value in degradations.items()
+               if value != defaults[name]]
+    if changed:
+        raise ValueError(
+            f"{', '.join(changed)}: with camera, the degradation arguments must keep their "
+            "defaults (set the CameraEffects fields instead)"
+        )
+
+
+def _camera_background(
+    background: str | NDArray[np.uint8] | None,
+    size: tuple[int, int],
+    pad: tuple[int, int, int, int],
+    rng: np.random.Generator,
+) -> tuple[FloatArray, str]:
+    """Linear-light background of the frame ``size`` extended by ``pad`` (left, top, right,
+    bottom): named textures are made at the extended size, a given image is mirrored out."""
+    w, h = size
+    left, top, right, bottom = pad
+    if isinstance(background, np.ndarray):
+        bg, name = make_background(background, (w, h), rng)
+        bg = cv2.copyMakeBorder(bg, top, bottom, left, right, cv2.BORDER_REFLECT)
+    else:
+        bg, name = make_background(background, (w + left + right, h + top + bottom), rng)
+    return srgb_decode(bg / 255.0) * 255.0, name
+
+
+def _within_radius(points: FloatArray, K: FloatArray, radius: float) -> bool:
+    """All pinhole points (N, 2) finite and closer than ``radius`` to the optical axis
+    (normalised coordinates)."""
+    if not np.all(np.isfinite(points)):
+        return False
+    y = (points[:, 1] - K[1, 2]) / K[1, 1]
+    x = (points[:, 0] - K[0, 2] - K[0, 1] * y) / K[0, 0]
+    return bool(np.all(np.hypot(x, y) < radius))

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from visloc.markers.dictionary import Dictionary, load_dictionary
 from visloc.synth._checks import check_int, check_number, check_size
+from visloc.synth.camera import CameraEffects
 from visloc.synth.markers import MarkerRender, render_markers
 from visloc.synth.textures import TEXTURES
 from visloc.types import Pose
@@ -15,15 +18,20 @@ from visloc.types import Pose
 FloatArray = NDArray[np.float64]
 
 #: Difficulty levels of :func:`random_scene`.
-DIFFICULTIES = ("easy", "hard", "small", "empty")
+DIFFICULTIES = ("easy", "hard", "small", "empty", "dark")
 #: Side (m) of the black square of every marker in random scenes.
 MARKER_LENGTH = 0.15
 #: Quiet zone (cells) of markers in random scenes.
 MARGIN_CELLS = 1.0
 
 # Marker side in the image as a fraction of the image height, and largest tilt (deg).
-_SIZE = {"easy": (0.20, 0.35), "hard": (0.12, 0.25), "small": (0.035, 0.08)}
-_TILT = {"easy": 40.0, "hard": 50.0, "small": 50.0}
+_SIZE = {"easy": (0.20, 0.35), "hard": (0.12, 0.25), "small": (0.035, 0.08), "dark": (0.20, 0.35)}
+_TILT = {"easy": 40.0, "hard": 50.0, "small": 50.0, "dark": 40.0}
+# Normalised radius of the image corner of a 4:3 default camera: the lens distortion drawn for
+# random scenes is scaled down for images whose corners lie farther out, so it never folds.
+_CORNER_RADIUS = 0.8
+#: Exposure range of 'dark' scenes rendered with a camera model (image mean below 30).
+DARK_EXPOSURE = (0.015, 0.035)
 
 
 def default_camera(size: tuple[int, int], hfov_deg: float = 65.0) -> FloatArray:
@@ -130,6 +138,10 @@ def _place(rng: np.random.Generator, K: FloatArray, size: tuple[int, int], n: in
 
 def _degradations(rng: np.random.Generator, difficulty: str) -> dict:
     p = {"blur_sigma": float(rng.uniform(0.3, 0.8)), "noise_sigma": float(rng.uniform(0.0, 2.0))}
+    if difficulty == "dark":  # image mean below 30: gain * 255 + noise bias < 27
+        p["noise_sigma"] = float(rng.uniform(1.0, 3.0))
+        p["gain"] = float(rng.uniform(0.04, 0.1))
+        return p
     if difficulty != "hard":
         return p
     kinds = rng.random(6) < 0.5
@@ -151,6 +163,49 @@ def _degradations(rng: np.random.Generator, difficulty: str) -> dict:
     return p
 
 
+def _camera_effects(rng: np.random.Generator, difficulty: str, K: FloatArray,
+                    size: tuple[int, int]) -> CameraEffects:
+    """Random camera effects of a scene of the given difficulty (see :func:`random_scene`)."""
+    w, h = size
+    corner = np.hypot(max(K[0, 2], w - 1 - K[0, 2]) / K[0, 0],
+                      max(K[1, 2], h - 1 - K[1, 2]) / K[1, 1])
+    shrink = min(1.0, (_CORNER_RADIUS / corner) ** 2)
+    p = {
+        "blur_sigma": float(rng.uniform(0.5, 1.0)),
+        "full_well": float(rng.uniform(3000.0, 8000.0)),
+        "read_noise": float(rng.uniform(0.5, 2.0)),
+        "vignetting": float(rng.uniform(0.0, 0.3)),
+        "k1": float(rng.uniform(-0.15, 0.05)) * shrink,
+        "k2": float(rng.uniform(-0.02, 0.02)) * shrink**2,
+        "exposure": float(rng.uniform(0.8, 1.2)),
+        "srgb": True,
+    }
+    jpeg = int(rng.integers(85, 96))
+    p["jpeg_quality"] = jpeg if rng.random() < 0.5 else None
+    if difficulty == "dark":
+        p["exposure"] = float(rng.uniform(DARK_EXPOSURE[0], DARK_EXPOSURE[1]))
+        p["read_noise"] = float(rng.uniform(1.0, 3.0))
+    elif difficulty == "hard":
+        kinds = rng.random(6) < 0.5
+        if not kinds.any():
+            kinds[rng.integers(6)] = True
+        if kinds[0]:
+            p["blur_sigma"] = float(rng.uniform(1.0, 2.5))
+        if kinds[1]:
+            p["motion_blur"] = float(rng.uniform(3.0, 8.0))
+            p["motion_angle"] = float(rng.uniform(0.0, np.pi))
+        if kinds[2]:
+            p["read_noise"] = float(rng.uniform(3.0, 6.0))
+            p["full_well"] = float(rng.uniform(1000.0, 3000.0))
+        if kinds[3]:
+            p["exposure"] = float(rng.uniform(0.25, 0.5))
+        if kinds[4]:
+            p["jpeg_quality"] = int(rng.integers(60, 81))
+        if kinds[5]:
+            p["vignetting"] = float(rng.uniform(0.3, 0.6))
+    return CameraEffects(**p)
+
+
 def random_scene(
     rng: np.random.Generator | int,
     *,
@@ -159,6 +214,8 @@ def random_scene(
     difficulty: str = "easy",
     n_markers: int | None = None,
     background: str | NDArray[np.uint8] | None = None,
+    camera: bool | CameraEffects = False,
+    lens: tuple[float, float] | None = None,
 ) -> MarkerRender:
     """Render a random scene of fully visible, non-overlapping markers.
 
@@ -175,22 +232,40 @@ def random_scene(
         ``(width, height)``.
     dictionary : str or Dictionary
         Marker dictionary.
-    difficulty : {'easy', 'hard', 'small', 'empty'}
+    difficulty : {'easy', 'hard', 'small', 'empty', 'dark'}
         ``'easy'``: marker side 20-35 % of the image height, tilt <= 40 deg, clean (blur
         sigma 0.3-0.8 px, noise 0-2). ``'hard'``: 12-25 %, tilt <= 50 deg, and at least one
         of blur sigma 1-2.5 px, motion blur 3-8 px, noise 4-10, gain 0.25-0.5, gradient
         0.3-0.6, JPEG quality 60-80. ``'small'``: 3.5-8 % (about 17-38 px at 480 rows),
         tilt <= 50 deg, clean. ``'empty'``: no marker, textured background, clean.
+        ``'dark'``: markers as ``'easy'``, image mean grey level below 30 (gain 0.04-0.1,
+        noise 1-3).
     n_markers : int or None
         Number of markers; ``None`` draws 1 to 4 (0 for ``'empty'``).
     background : str, ndarray or None
         As in :func:`render_markers`; ``None`` picks a random texture (``'flat'`` included
-        only for ``'easy'``).
+        only for ``'easy'`` and ``'dark'``).
+    camera : bool or CameraEffects
+        ``False`` (default): the degradations above, applied to the grey levels. ``True``:
+        the image goes through a random camera model instead
+        (:class:`~visloc.synth.camera.CameraEffects`, drawn after everything else, so the
+        markers and background are those of ``camera=False``): optics blur sigma 0.5-1 px,
+        shot noise (full well 3000-8000), read noise 0.5-2 linear grey levels, vignetting
+        0-0.3, ``k1`` in [-0.15, 0.05], ``|k2|`` <= 0.02 (both scaled down for images whose
+        corners lie farther out than a 4:3 image's), exposure 0.8-1.2, sRGB, JPEG quality
+        85-95 half of the time. ``'hard'`` adds at least one of optics blur 1-2.5 px, motion
+        blur 3-8 px, read noise 3-6 with full well 1000-3000, exposure 0.25-0.5, JPEG 60-80,
+        vignetting 0.3-0.6; ``'dark'`` has exposure in :data:`DARK_EXPOSURE` and read noise
+        1-3. A ``CameraEffects`` is used as given.
+    lens : (float, float) or None
+        With ``camera=True``: the distortion ``(k1, k2)`` to use instead of a random one
+        (one lens for a whole data set).
 
     Returns
     -------
     MarkerRender
-        ``params`` also holds ``difficulty``.
+        ``params`` also holds ``difficulty``; with a camera model the ground truth is
+        distorted and ``dist`` holds the distortion (see :func:`render_markers`).
 
     Raises
     ------
@@ -204,6 +279,8 @@ def random_scene(
     w, h = check_size(size)
     if difficulty not in DIFFICULTIES:
         raise ValueError(f"difficulty must be one of {DIFFICULTIES}, got {difficulty!r}")
+    if not isinstance(camera, (bool, np.bool_, CameraEffects)):
+        raise TypeError(f"camera must be a bool or a CameraEffects, got {type(camera).__name__}")
     dic = load_dictionary(dictionary)
     if n_markers is None:
         n = 0 if difficulty == "empty" else int(rng.integers(1, 5))
@@ -214,9 +291,18 @@ def random_scene(
     K = default_camera((w, h))
     placements = _place(rng, K, (w, h), n, dic, difficulty) if n else []
     if background is None:
-        choices = TEXTURES if difficulty == "easy" else tuple(t for t in TEXTURES if t != "flat")
+        flat = difficulty in ("easy", "dark")
+        choices = TEXTURES if flat else tuple(t for t in TEXTURES if t != "flat")
         background = str(rng.choice(choices))
-    deg = _degradations(rng, difficulty)
+    if isinstance(camera, CameraEffects):
+        deg: dict = {"camera": camera}
+    elif camera:
+        effects = _camera_effects(rng, difficulty, K, (w, h))
+        if lens is not None:  # one lens for a whole data set
+            effects = replace(effects, k1=float(lens[0]), k2=float(lens[1]))
+        deg = {"camera": effects}
+    else:
+        deg = _degradations(rng, difficulty)
     render = render_markers(K, (w, h), placements, dic, background=background,
                             margin_cells=MARGIN_CELLS, rng=rng, **deg)
     render.params["difficulty"] = difficulty

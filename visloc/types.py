@@ -90,9 +90,9 @@ class MarkerDetection:
         Whether the corners come from the grey-level edge refinement (stage 8); False when
         it failed (occluded or cluttered sides) and the contour line fits were kept.
     confidence : float
-        Bit certainty in [0, 1]: the mean over the marker's bits of how clearly each cell's
-        samples agree with the decoded code (+1 all samples agree, -1 all disagree), clipped
-        at 0. 1 for a clean read; corrected bits and mixed cells lower it.
+        Bit certainty in [0, 1], OpenCV's definition: 1 minus the share of the marker's read
+        area (every cell, border included, less a margin) whose colour contradicts the
+        decoded code. 1 for a clean read; corrected bits and stained cells lower it.
     inverted : bool
         Whether the marker is white on black (found with ``inverted=True`` or ``"both"``).
     """

@@ -25,7 +25,8 @@ from numpy.typing import NDArray
 
 from visloc.markers.dictionary import Dictionary
 
-__all__ = ["BitRead", "CellSample", "decode", "otsu_threshold", "read_bits", "sample_cells", "square_to_quad"]
+__all__ = ["BitRead", "CellSample", "cell_white_fractions", "decode", "otsu_threshold", "read_bits", "sample_cells",
+           "square_to_quad"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -129,6 +130,50 @@ def sample_cells(gray: NDArray[np.uint8], quads: NDArray, n: int, *, per_side: i
     return CellSample(vals[:, : n * n].reshape(-1, n, n), vals[:, n * n :], samples)
 
 
+def cell_white_fractions(gray: NDArray[np.uint8], quads: NDArray, n: int, threshold: NDArray, *,
+                         per_side: int = 8, margin: float = 0.13) -> NDArray[np.float64]:
+    """Fraction of each cell's read area brighter than the marker's threshold, as OpenCV
+    reads cells (the share of white pixels of each cell of the marker warped square, a
+    ``margin`` of the cell left out on every side).
+
+    Parameters
+    ----------
+    gray : ndarray (H, W) uint8
+    quads : ndarray (K, 4, 2)
+        Corners clockwise in the image, corner 0 the grid's top-left (as :func:`sample_cells`).
+    n : int
+        Cells per side including the border.
+    threshold : ndarray (K,)
+        Each marker's grey-level threshold.
+    per_side : int
+        Samples across a cell's read area (``per_side ** 2`` per cell, evenly spread).
+    margin : float
+        Fraction of the cell left out on each side, in [0, 0.5) (OpenCV's
+        ``perspectiveRemoveIgnoredMarginPerCell``, 0.13).
+
+    Returns
+    -------
+    ndarray (K, n, n)
+    """
+    q = np.asarray(quads, np.float64).reshape(-1, 4, 2)
+    if len(q) == 0:
+        return np.zeros((0, n, n))
+    sub = margin + (1 - 2 * margin) * (np.arange(per_side) + 0.5) / per_side
+    cells = np.arange(n)[:, None] + sub[None, :]  # (n, per_side): positions along one side
+    u = np.broadcast_to(cells.reshape(1, -1), (n * per_side, n * per_side)) / n  # x along a row
+    uv1 = np.stack([u.ravel(), u.T.ravel(), np.ones(u.size)]).astype(np.float32)
+    hom = (square_to_quad(q).reshape(-1, 3).astype(np.float32) @ uv1).reshape(len(q), 3, -1)
+    side = n * per_side  # one map row per sample row, markers in chunks: OpenCV maps stay under 32767 px
+    mx = (hom[:, 0] / hom[:, 2]).reshape(-1, side)
+    my = (hom[:, 1] / hom[:, 2]).reshape(-1, side)
+    rows = (32000 // side) * side
+    vals = np.concatenate([cv2.remap(gray, mx[a : a + rows], my[a : a + rows], cv2.INTER_LINEAR,
+                                     borderMode=cv2.BORDER_REPLICATE) for a in range(0, len(mx), rows)])
+    vals = vals.reshape(len(q), n, per_side, n, per_side)
+    white = vals > np.asarray(threshold, np.float64).reshape(-1, 1, 1, 1, 1)
+    return white.mean(axis=(2, 4))
+
+
 def otsu_threshold(values: NDArray) -> tuple[NDArray, NDArray, NDArray]:
     """Otsu's two-class split of each row of ``values`` (K, m).
 
@@ -153,8 +198,8 @@ class BitRead(NamedTuple):
     Attributes
     ----------
     valid : ndarray (K,) bool
-        Contrast at least ``min_contrast`` and at most ``border_error_rate * bits^2`` white
-        border cells (OpenCV's rule).
+        Contrast at least ``min_contrast``, at most ``border_error_rate * bits^2`` white
+        border cells (OpenCV's rule) and at least ``min_quiet_zone`` of the ring cells white.
     bits : ndarray (K, s, s) uint8
         Inner cells, 1 = white.
     margin : ndarray (K,)
@@ -162,19 +207,20 @@ class BitRead(NamedTuple):
         in [0, 1].
     contrast : ndarray (K,)
         Bright class mean minus dark class mean, grey levels.
-    white_fraction : ndarray (K, s, s)
-        Fraction of each inner cell's samples above the threshold.
+    threshold : ndarray (K,)
+        Each candidate's grey-level threshold (Otsu's split of its cells and ring).
     """
 
     valid: NDArray[np.bool_]
     bits: NDArray[np.uint8]
     margin: NDArray
     contrast: NDArray
-    white_fraction: NDArray
+    threshold: NDArray
 
 
 def read_bits(
-    sample: CellSample, border_error_rate: float = 0.35, min_contrast: float = 10.0, *, border: int = 1
+    sample: CellSample, border_error_rate: float = 0.35, min_contrast: float = 10.0, *, border: int = 1,
+    min_quiet_zone: float = 0.0,
 ) -> BitRead:
     """Threshold the cells into bits and check the black border.
 
@@ -190,6 +236,10 @@ def read_bits(
         Least difference between the white and black class means, grey levels.
     border : int
         Width of the black border in cells (OpenCV's ``markerBorderBits``).
+    min_quiet_zone : float
+        Least fraction of the ring cells just outside the border that must be white: a
+        printed marker sits in a white quiet zone, a dark patch with bright specks in it
+        (a star field, a pattern in shadow) does not.
     """
     cells = sample.cells
     k, n, _ = cells.shape
@@ -201,15 +251,16 @@ def read_bits(
         white = np.where(fraction == 0.5, cells > t, fraction > 0.5)
     else:
         white = cells > t
-        fraction = white.astype(np.float64)
     frame = np.ones((n, n), bool)
     frame[border:-border, border:-border] = False
     border_white = white[:, frame].sum(axis=1)
     size = n - 2 * border
     valid = (contrast >= min_contrast) & (border_white <= int(border_error_rate * size**2))
+    if min_quiet_zone > 0:
+        valid &= (sample.ring > thr[:, None]).mean(axis=1) >= min_quiet_zone
     inner = (slice(None), slice(border, -border), slice(border, -border))
     margin = np.abs(cells[inner] - t).reshape(k, -1).min(axis=1) / np.maximum(0.5 * contrast, 1e-6)
-    return BitRead(valid, white[inner].astype(np.uint8), np.minimum(margin, 1.0), contrast, fraction[inner])
+    return BitRead(valid, white[inner].astype(np.uint8), np.minimum(margin, 1.0), contrast, thr)
 
 
 def decode(

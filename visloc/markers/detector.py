@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from visloc.markers.binarize import blur, default_window, threshold, to_gray
-from visloc.markers.bits import CellSample, decode, read_bits, sample_cells
+from visloc.markers.bits import CellSample, cell_white_fractions, decode, read_bits, sample_cells
 from visloc.markers.contours import (
     CandidateFilter,
     enclosing_borders,
@@ -68,11 +68,17 @@ class SearchPass:
         :func:`visloc.markers.binarize.default_window` of the shrunk image.
     offset : float or None
         Stage 3 threshold offset of this pass, grey levels; ``None``: the detector's ``offset``.
+    erode : int
+        Stage 3b: the ink of the binary image eroded with a square this many pixels wide
+        (0: none). It cuts the thin necks where a marker's border touches other ink at its
+        corners (grid boards, markers on patterned cards), so the marker's own outline
+        becomes a closed border of its own again; stage 8 restores the true edges.
     """
 
     scale: float = 1.0
     window: int | None = None
     offset: float | None = None
+    erode: int = 0
 
 
 #: Search passes trading recall on the smallest markers for speed: the fine pass on an image
@@ -125,6 +131,22 @@ class DetectorParams:
         linear light, so the wrong choice biases corners by a fraction of the blur width.
     border_error_rate : float
         Stage 9: tolerated white border cells, as a fraction of the bit count (OpenCV: 0.35).
+    min_quiet_zone : float
+        Stage 9: least fraction of the cells of the ring around the border that must be white
+        (the marker's quiet zone; lenient, as markers on boards touch other ink at their
+        corners). On 19 real photos every marker's ring is at least 86 % white; the false
+        detections of dark photos with bright specks have none.
+    cell_margin : float
+        Stage 10's check of a decoded marker reads each cell's area without this fraction of
+        the cell on every side (OpenCV's ``perspectiveRemoveIgnoredMarginPerCell``, 0.13).
+    bit_threshold : float or None
+        With a value, that check also counts a cell as an error when more than this share of
+        its read area is wrong (OpenCV's ``validBitIdThreshold``, default 0.49 there), and
+        the border and the code tolerate ``border_error_rate`` and ``error_correction_rate``
+        of such cells. ``None`` (the default): the bits are the majority reads of stage 9
+        alone (the area read only gives the confidence): on small markers in real photos
+        (about a pixel per cell) the two reads differ on a cell or two, and a marker both
+        OpenCV and stage 9 read cleanly was lost to the area check.
     error_correction_rate : float
         Stage 10: fraction of the dictionary's correction capacity used (OpenCV: 0.6).
     """
@@ -145,6 +167,9 @@ class DetectorParams:
     border_bits: int = 1
     inverted: bool | str = False
     border_error_rate: float = 0.35
+    min_quiet_zone: float = 0.25
+    cell_margin: float = 0.13
+    bit_threshold: float | None = None
     error_correction_rate: float = 0.6
 
 
@@ -313,9 +338,40 @@ class MarkerDetector:
                              border_distance=p.candidates.border_distance / scale.max())
         blurred = blur(work, p.blur_sigma)  # stage 2
         binary = threshold(blurred, window=window, offset=p.offset if sp.offset is None else sp.offset)  # stage 3
+        if sp.erode:  # stage 3b
+            binary = cv2.erode(binary, np.ones((sp.erode, sp.erode), np.uint8))
         # stage 4: a marker's frame encloses its white cells, so ink without a hole is no marker
         contours = enclosing_borders(binary, *perimeter_bounds(work.shape, candidates))
         return _PassImage(work.shape, scale, window, candidates, blurred, binary, contours)
+
+    def _area_check(self, gray: NDArray[np.uint8], corners: NDArray, thr: NDArray, ids: NDArray,
+                    shift: NDArray) -> tuple[NDArray, NDArray[np.bool_]]:
+        """OpenCV's cell read of decoded markers (K): each cell's share of wrong area (white
+        where the code has black or the other way round) over its read area
+        (:func:`visloc.markers.bits.cell_white_fractions`, ``cell_margin`` left out).
+
+        Returns the confidence (K,), ``1 - wrong area / read area`` over all cells, border
+        included (OpenCV's ``detectMarkersWithConfidence``), and whether the marker stands: a
+        cell whose wrong share exceeds ``bit_threshold`` is an error, and the border and the
+        code tolerate ``border_error_rate`` and ``error_correction_rate`` of them."""
+        p = self.params
+        bb = p.border_bits
+        n = self.dictionary.marker_size + 2 * bb
+        cell_px = float(np.median(np.sqrt(np.abs(_areas(corners))))) / n
+        per_side = int(np.clip(np.ceil(cell_px), 4, 32))  # about a sample per pixel, 4-32 per cell
+        white = cell_white_fractions(gray, corners, n, thr, per_side=per_side, margin=p.cell_margin)
+        expected = _expected_cells(self.dictionary.bits[ids], shift, bb)
+        wrong = np.where(expected == 1, 1.0 - white, white)
+        confidence = 1.0 - wrong.reshape(len(wrong), -1).mean(axis=1)
+        if p.bit_threshold is None:
+            return confidence, np.ones(len(wrong), bool)
+        bad = wrong > p.bit_threshold
+        frame = np.ones((n, n), bool)
+        frame[bb:-bb, bb:-bb] = False
+        s = self.dictionary.marker_size
+        clear = ((bad[:, frame].sum(axis=1) <= int(p.border_error_rate * s * s))
+                 & (bad[:, ~frame].sum(axis=1) <= int(self.dictionary.max_correction * p.error_correction_rate)))
+        return confidence, clear
 
     def _passes(self, gray: NDArray[np.uint8], base: float) -> Iterator[_PassImage]:
         """Stages 2-4 of every search pass, in order; all but the first are computed on a
@@ -421,7 +477,8 @@ class MarkerDetector:
             corners, refined = refine_quads(gray, quads, radius=radii, iterations=p.refine_iterations,
                                             count=p.refine_profiles, response=self._luts[inverted])
         cells = sample_cells(gray, corners, n_cells, per_side=4)  # stage 9, batched
-        valid, bits, margin, contrast, fraction = read_bits(cells, p.border_error_rate, border=bb)
+        valid, bits, margin, contrast, thr = read_bits(cells, p.border_error_rate, border=bb,
+                                                            min_quiet_zone=p.min_quiet_zone)
         ids, shift, hamming, matched = decode(bits, self.dictionary, p.error_correction_rate)  # 10
         # a small or steeply tilted marker (about a pixel per cell) can read differently through
         # the stage-7 corners: where the refined read fails, that read gets its chance (and a
@@ -429,7 +486,7 @@ class MarkerDetector:
         retry = np.flatnonzero(refined & ~(valid & matched))
         if len(retry):
             again = sample_cells(gray, quads[retry], n_cells, per_side=4)
-            read = read_bits(again, p.border_error_rate, border=bb)
+            read = read_bits(again, p.border_error_rate, border=bb, min_quiet_zone=p.min_quiet_zone)
             dec = decode(read.bits, self.dictionary, p.error_correction_rate)
             won = retry[read.valid & dec[3]]
             if len(won):
@@ -437,13 +494,18 @@ class MarkerDetector:
                 cells = CellSample(cells.cells.copy(), cells.ring.copy(), cells.samples.copy())
                 cells.cells[won], cells.ring[won], cells.samples[won] = (again.cells[pick], again.ring[pick],
                                                                          again.samples[pick])
-                for arr, new in zip((valid, bits, margin, contrast, fraction), read, strict=True):
+                for arr, new in zip((valid, bits, margin, contrast, thr), read, strict=True):
                     arr[won] = new[pick]
                 for arr, new in zip((ids, shift, hamming, matched), dec, strict=True):
                     arr[won] = new[pick]
                 corners[won], refined[won] = quads[won], False  # the read vouches for those corners
         accept = valid & matched
-        confidence = _confidence(fraction, self.dictionary.bits[ids], shift).tolist()
+        confidence = np.zeros(len(quads))
+        if accept.any():  # OpenCV's read of the accepted markers: cell areas, confidence, bit threshold
+            acc = np.flatnonzero(accept)
+            confidence[acc], clear = self._area_check(gray, corners[acc], thr[acc], ids[acc], shift[acc])
+            accept[acc[~clear]] = False
+        confidence = confidence.tolist()
         # each accepted quad from the marker's own top-left corner, and its area (all at once)
         order = (_FOUR[None, :] + shift[:, None]) % 4
         rolled = corners[np.arange(len(corners))[:, None], order]
@@ -479,8 +541,10 @@ def _as_pass(p: object) -> SearchPass:
         raise ValueError(f"passes: window must be an odd integer >= 3, got {sp.window}")
     if sp.offset is not None and not np.isfinite(sp.offset):
         raise ValueError(f"passes: offset must be a finite number, got {sp.offset}")
+    if not 0 <= int(sp.erode) <= 5:
+        raise ValueError(f"passes: erode must be 0 to 5 px, got {sp.erode}")
     return SearchPass(float(sp.scale), None if sp.window is None else int(sp.window),
-                      None if sp.offset is None else float(sp.offset))
+                      None if sp.offset is None else float(sp.offset), int(sp.erode))
 
 
 def _note(log: dict | None, contour, scale, split, quad, cells, bits, det, stage: str) -> None:
@@ -488,19 +552,16 @@ def _note(log: dict | None, contour, scale, split, quad, cells, bits, det, stage
         log["candidates"].append(CandidateTrace(contour, scale, split, quad, cells, bits, det, stage))
 
 
-def _confidence(fraction: NDArray, codes: NDArray, shift: NDArray) -> NDArray:
-    """Bit certainty (K,) in [0, 1] of each candidate's read against its decoded code: the
-    mean over its cells of ``2 f - 1`` where the code has white, ``1 - 2 f`` where it has
-    black (``f``: the cell's white fraction), clipped at 0. ``codes`` (K, s, s) are the
-    decoded ids' bits in the marker's own orientation, ``shift`` :func:`decode`'s corner shift."""
+def _expected_cells(codes: NDArray, shift: NDArray, border: int) -> NDArray[np.uint8]:
+    """The cells (K, n, n) each candidate should show, 1 = white: a black border ``border``
+    cells wide around the decoded codes (K, s, s), turned as :func:`decode` saw them."""
     seen = np.empty_like(codes)
     turns = (4 - shift) % 4  # decode: observed = rot90(true, turns)
     for r in range(4):
         pick = turns == r
         if pick.any():
             seen[pick] = np.rot90(codes[pick], r, axes=(1, 2))
-    agree = np.where(seen == 1, 2 * fraction - 1, 1 - 2 * fraction)
-    return np.clip(agree.reshape(len(agree), -1).mean(axis=1), 0.0, 1.0)
+    return np.pad(seen, ((0, 0), (border, border), (border, border)))
 
 
 def _clockwise(quads: NDArray) -> NDArray:

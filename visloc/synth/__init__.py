@@ -8,12 +8,23 @@ Flights: :func:`render_flight` renders a downward-looking camera flying a
 :func:`flight_trajectory` (or :func:`straight_track`) over textured ground, with exact
 velocity and yaw-rate ground truth (:class:`FlightTrack`); :func:`write_flight` writes it.
 
+Boards: :func:`render_aprilgrid` draws a Kalibr-style AprilGrid (tags touching corner squares)
+with one ground-truth entry per tag, :func:`random_board_scene` a random one.
+
 Camera model: :class:`CameraEffects` and :func:`apply_camera` turn an ideal linear-light
 render into a camera-like frame (lens distortion, blur, vignetting, shot and read noise, sRGB,
 JPEG); ``render_markers(..., camera=...)`` and ``random_scene(..., camera=True)`` use it, with
 ground truth from :func:`distort_points`.
 """
 
+from visloc.synth.boards import (
+    BOARD_DIFFICULTIES,
+    BOARD_SPACING_RATIO,
+    BOARD_TAG_LENGTH,
+    aprilgrid_tag_corners,
+    random_board_scene,
+    render_aprilgrid,
+)
 from visloc.synth.camera import (
     CameraEffects,
     apply_camera,
@@ -51,6 +62,9 @@ from visloc.synth.scenes import (
 from visloc.synth.textures import TEXTURES
 
 __all__ = [
+    "BOARD_DIFFICULTIES",
+    "BOARD_SPACING_RATIO",
+    "BOARD_TAG_LENGTH",
     "DARK_EXPOSURE",
     "DIFFICULTIES",
     "MARKER_LENGTH",
@@ -62,6 +76,7 @@ __all__ = [
     "MarkerRender",
     "RenderedMarker",
     "apply_camera",
+    "aprilgrid_tag_corners",
     "default_camera",
     "distort_points",
     "flight_trajectory",
@@ -70,7 +85,9 @@ __all__ = [
     "marker_object_points",
     "polygon_coverage",
     "project_points",
+    "random_board_scene",
     "random_scene",
+    "render_aprilgrid",
     "render_dataset",
     "render_flight",
     "render_ground_view",

@@ -191,7 +191,17 @@ def _project_clipped(K: FloatArray, pose: Pose, poly: FloatArray, near: float) -
 def _draw_exact(canvas: FloatArray, K: FloatArray, pose: Pose, bits, length, margin) -> None:
     """Composite one marker onto ``canvas`` in place with exact area coverage."""
     outer, polys, weights = _plane_polygons(bits, length, margin)
-    near = 1e-6 * length
+    _composite_exact(canvas, K, pose, outer, polys, weights, 1e-6 * length)
+
+
+def _composite_exact(canvas: FloatArray, K: FloatArray, pose: Pose, outer: FloatArray,
+                     polys: Sequence[FloatArray], weights: Sequence[float], near: float) -> None:
+    """Composite printed plane polygons onto ``canvas`` in place with exact area coverage.
+
+    ``outer`` (4, 2) bounds the printed area (opaque); inside it the print is white where
+    ``sum(weights[k] * [inside polys[k]])`` is 1 and black where it is 0 (plane coordinates,
+    clipped to ``z >= near`` in the camera).
+    """
     img_outer = _project_clipped(K, pose, outer, near)
     if len(img_outer) == 0:
         return
@@ -358,29 +368,9 @@ def render_markers(
         _check_camera_effects(camera, blur_sigma=blur_sigma, motion_blur=motion_blur,
                               motion_angle=motion_angle, noise_sigma=noise_sigma, gain=gain,
                               gradient=gradient, jpeg_quality=jpeg_quality)
-        k1, k2 = camera.k1, camera.k2
-        left, top, right, bottom = ideal_window(k, k1, k2, (w, h))
-        bg, bg_name = _camera_background(background, (w, h), (left, top, right, bottom), gen)
-        k_ideal = k.copy()
-        k_ideal[:2, 2] += (left, top)
-    else:
-        bg, bg_name = make_background(background, (w, h), gen)
-        k_ideal = k
-    markers = []
-    for marker_id, pose, length in items:
-        corners = project_points(k, pose, marker_object_points(length))
-        in_front = bool(np.all(pose.apply(marker_object_points(length))[:, 2] > 0))
-        if camera is not None:
-            one_to_one = _within_radius(corners, k, monotonic_radius(k1, k2))
-            corners = distort_points(corners, k, k1, k2)
-            in_front = in_front and one_to_one
-        inside = bool(
-            np.all(np.isfinite(corners))
-            and np.all(corners >= VISIBLE_MARGIN - 0.5)
-            and np.all(corners <= np.array([w, h]) - 0.5 - VISIBLE_MARGIN)
-        )
-        visible = in_front and inside and faces_camera(pose)
-        markers.append(RenderedMarker(marker_id, corners, pose, length, visible))
+    bg, bg_name, k_ideal = _ideal_background(k, (w, h), background, camera, gen)
+    markers = [_marker_truth(k, (w, h), camera, marker_id, pose, length)
+               for marker_id, pose, length in items]
 
     order = sorted(range(len(items)), key=lambda i: -float(np.linalg.norm(items[i][1].t)))
     drawn = [i for i in order if faces_camera(items[i][1])]
@@ -398,6 +388,60 @@ def render_markers(
             _draw_sampled(canvas, k_ideal, pose, dic.bits[marker_id], length, margin_cells, s)
         canvas = canvas.reshape(hc, s, wc, s).astype(np.float64).mean(axis=(1, 3))
 
+    params = {"background": bg_name, "supersample": supersample, "margin_cells": margin_cells}
+    return _finish(canvas, k, k_ideal, (w, h), markers, dic.name, params, camera, gen,
+                   blur_sigma=blur_sigma, motion_blur=motion_blur, motion_angle=motion_angle,
+                   noise_sigma=noise_sigma, gain=gain, gradient=gradient,
+                   jpeg_quality=jpeg_quality)
+
+
+def _ideal_background(
+    k: FloatArray,
+    size: tuple[int, int],
+    background: str | NDArray[np.uint8] | None,
+    camera: CameraEffects | None,
+    gen: np.random.Generator,
+) -> tuple[FloatArray, str, FloatArray]:
+    """The canvas to draw on, the background's name and the canvas's pinhole matrix: the
+    frame itself, or with a camera model the linear-light image extended past the frame as
+    far as the lens distortion looks."""
+    w, h = size
+    if camera is None:
+        bg, bg_name = make_background(background, (w, h), gen)
+        return bg, bg_name, k
+    left, top, right, bottom = ideal_window(k, camera.k1, camera.k2, (w, h))
+    bg, bg_name = _camera_background(background, (w, h), (left, top, right, bottom), gen)
+    k_ideal = k.copy()
+    k_ideal[:2, 2] += (left, top)
+    return bg, bg_name, k_ideal
+
+
+def _marker_truth(k: FloatArray, size: tuple[int, int], camera: CameraEffects | None,
+                  marker_id: int, pose: Pose, length: float) -> RenderedMarker:
+    """Ground truth of one marker: (distorted) corner projections and visibility."""
+    w, h = size
+    corners = project_points(k, pose, marker_object_points(length))
+    in_front = bool(np.all(pose.apply(marker_object_points(length))[:, 2] > 0))
+    if camera is not None:
+        one_to_one = _within_radius(corners, k, monotonic_radius(camera.k1, camera.k2))
+        corners = distort_points(corners, k, camera.k1, camera.k2)
+        in_front = in_front and one_to_one
+    inside = bool(
+        np.all(np.isfinite(corners))
+        and np.all(corners >= VISIBLE_MARGIN - 0.5)
+        and np.all(corners <= np.array([w, h]) - 0.5 - VISIBLE_MARGIN)
+    )
+    visible = in_front and inside and faces_camera(pose)
+    return RenderedMarker(marker_id, corners, pose, length, visible)
+
+
+def _finish(canvas: FloatArray, k: FloatArray, k_ideal: FloatArray, size: tuple[int, int],
+            markers: list[RenderedMarker], dictionary: str, params: dict,
+            camera: CameraEffects | None, gen: np.random.Generator, *, blur_sigma: float,
+            motion_blur: float, motion_angle: float, noise_sigma: float, gain: float,
+            gradient: float, jpeg_quality: int | None) -> MarkerRender:
+    """Turn the ideal canvas into the frame (degradations or camera model) and pack the
+    render; ``params`` holds the renderer's own options, the degradations are added."""
     if camera is None:
         image, grad_angle = degrade(
             canvas, gen, blur_sigma=blur_sigma, motion_blur=motion_blur,
@@ -405,12 +449,10 @@ def render_markers(
             jpeg_quality=jpeg_quality,
         )
     else:
-        image, camera_params = apply_camera(canvas, k, camera, gen, size=(w, h), ideal_K=k_ideal)
+        image, camera_params = apply_camera(canvas, k, camera, gen, size=size, ideal_K=k_ideal)
         grad_angle = None
     params = {
-        "background": bg_name,
-        "supersample": supersample,
-        "margin_cells": margin_cells,
+        **params,
         "blur_sigma": blur_sigma,
         "motion_blur": motion_blur,
         "motion_angle": motion_angle,
@@ -421,9 +463,9 @@ def render_markers(
         "jpeg_quality": jpeg_quality,
     }
     if camera is None:
-        return MarkerRender(image, markers, k, dic.name, params)
+        return MarkerRender(image, markers, k, dictionary, params)
     params["camera"] = camera_params
-    return MarkerRender(image, markers, k, dic.name, params, camera.dist)
+    return MarkerRender(image, markers, k, dictionary, params, camera.dist)
 
 
 def _check_camera_effects(camera: object, **degradations: object) -> None:

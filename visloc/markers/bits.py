@@ -17,6 +17,7 @@ batch of K candidates at once (one OpenCV remap per frame).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import NamedTuple
 
 import cv2
@@ -40,13 +41,13 @@ class CellSample:
         runs from corner 0 to corner 1, column 0 from corner 0 to corner 3.
     ring : ndarray (K, 4n + 4) float
         Mean grey level of the cells of the ring just outside the border (the white margin).
-    samples : ndarray (K, n, n, S) float32 or None
+    samples : ndarray (K, n, n, S) uint8 or None
         The S grey levels sampled inside each cell (their mean is ``cells``).
     """
 
     cells: NDArray[np.float64]
     ring: NDArray[np.float64]
-    samples: NDArray[np.float32] | None = None
+    samples: NDArray[np.uint8] | None = None
 
 
 def square_to_quad(quads: NDArray) -> NDArray[np.float64]:
@@ -117,7 +118,7 @@ def sample_cells(gray: NDArray[np.uint8], quads: NDArray, n: int, *, per_side: i
     q = np.asarray(quads, np.float64).reshape(-1, 4, 2)
     m = per_side * per_side
     if len(q) == 0:
-        return CellSample(np.zeros((0, n, n)), np.zeros((0, 4 * n + 4)), np.zeros((0, n, n, m), np.float32))
+        return CellSample(np.zeros((0, n, n)), np.zeros((0, 4 * n + 4)), np.zeros((0, n, n, m), np.uint8))
     if (n, per_side) not in _GRIDS:
         uv = _unit_grid(n, per_side)
         _GRIDS[n, per_side] = np.vstack([uv.T, np.ones(len(uv))]).astype(np.float32)
@@ -126,8 +127,20 @@ def sample_cells(gray: NDArray[np.uint8], quads: NDArray, n: int, *, per_side: i
     mx, my = hom[:, 0] / hom[:, 2], hom[:, 1] / hom[:, 2]
     raw = cv2.remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).reshape(len(q), -1, m)
     vals = raw.sum(axis=2, dtype=np.float64) / m
-    samples = raw[:, : n * n].reshape(len(q), n, n, m).astype(np.float32)
+    samples = raw[:, : n * n].reshape(len(q), n, n, m)
     return CellSample(vals[:, : n * n].reshape(-1, n, n), vals[:, n * n :], samples)
+
+
+@lru_cache(maxsize=64)
+def _area_grid(n: int, per_side: int, margin: float) -> NDArray[np.float32]:
+    """(3, (n per_side)^2) points u, v, 1 of :func:`cell_white_fractions` in the unit square,
+    row by row (read-only)."""
+    sub = margin + (1 - 2 * margin) * (np.arange(per_side) + 0.5) / per_side
+    cells = (np.arange(n)[:, None] + sub[None, :]).ravel() / n  # positions along one side
+    u = np.broadcast_to(cells[None, :], (len(cells), len(cells)))
+    grid = np.stack([u.ravel(), u.T.ravel(), np.ones(u.size)]).astype(np.float32)
+    grid.setflags(write=False)
+    return grid
 
 
 def cell_white_fractions(gray: NDArray[np.uint8], quads: NDArray, n: int, threshold: NDArray, *,
@@ -158,10 +171,7 @@ def cell_white_fractions(gray: NDArray[np.uint8], quads: NDArray, n: int, thresh
     q = np.asarray(quads, np.float64).reshape(-1, 4, 2)
     if len(q) == 0:
         return np.zeros((0, n, n))
-    sub = margin + (1 - 2 * margin) * (np.arange(per_side) + 0.5) / per_side
-    cells = np.arange(n)[:, None] + sub[None, :]  # (n, per_side): positions along one side
-    u = np.broadcast_to(cells.reshape(1, -1), (n * per_side, n * per_side)) / n  # x along a row
-    uv1 = np.stack([u.ravel(), u.T.ravel(), np.ones(u.size)]).astype(np.float32)
+    uv1 = _area_grid(n, per_side, float(margin))
     hom = (square_to_quad(q).reshape(-1, 3).astype(np.float32) @ uv1).reshape(len(q), 3, -1)
     side = n * per_side  # one map row per sample row, markers in chunks: OpenCV maps stay under 32767 px
     mx = (hom[:, 0] / hom[:, 2]).reshape(-1, side)

@@ -15,7 +15,10 @@ One frame's path:
 
 Several passes combine what one threshold window cannot do alone: a fine window at full
 resolution closes the thin borders of small or oblique markers, a coarse window on a shrunk
-image closes the borders of large, blurred ones, at a quarter of the cost.
+image closes the borders of large, blurred ones, at a quarter of the cost. Stage 3b
+(``erode``, off by default) runs stage 4 once more on the first pass's binary image with the
+ink eroded, which separates markers whose border touches other ink at the corners (grid
+boards). In dark frames the pass on an image shrunk 4 times thresholds with a lower offset.
 
 White-on-black markers (``inverted=True``) are black-on-white markers of the inverted image;
 stage 8 then reads the inverted grey levels through the matching response. ``"both"`` runs
@@ -24,6 +27,7 @@ the whole path twice, once per polarity.
 
 from __future__ import annotations
 
+import itertools
 import os
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
@@ -68,17 +72,11 @@ class SearchPass:
         :func:`visloc.markers.binarize.default_window` of the shrunk image.
     offset : float or None
         Stage 3 threshold offset of this pass, grey levels; ``None``: the detector's ``offset``.
-    erode : int
-        Stage 3b: the ink of the binary image eroded with a square this many pixels wide
-        (0: none). It cuts the thin necks where a marker's border touches other ink at its
-        corners (grid boards, markers on patterned cards), so the marker's own outline
-        becomes a closed border of its own again; stage 8 restores the true edges.
     """
 
     scale: float = 1.0
     window: int | None = None
     offset: float | None = None
-    erode: int = 0
 
 
 #: Search passes trading recall on the smallest markers for speed: the fine pass on an image
@@ -95,6 +93,21 @@ class DetectorParams:
     passes : tuple of SearchPass
         Candidate searches, in order; a candidate an earlier pass proposed already is
         skipped. Their scales are relative to the base scale.
+    dark_passes : tuple of SearchPass
+        The searches of frames whose mean grey level is below ``dark_mean``. In a frame of
+        mean grey below 30 the sRGB curve turns a little sensor noise into tens of grey levels
+        on black, and the black border breaks up at the finer scales; the default's last
+        pass, on the image shrunk 4 times, thresholds with an offset of 4 instead of 7 (on
+        brighter frames that offset lets texture through as candidates, at a cost of about
+        0.4 ms per 640 x 480 frame).
+    dark_mean : float
+        Mean grey level below which a frame is searched with ``dark_passes``.
+    erode : int
+        Stage 3b: stage 4 once more on the first pass's binary image with its ink eroded by a
+        square this many pixels wide (0, the default: not). It cuts the thin necks where a
+        marker's border touches other ink at its corners (grid boards such as AprilGrids,
+        markers on patterned cards), so the marker's own outline closes again; stage 8
+        restores the true edges. ``erode=2`` costs about 0.5 ms per 640 x 480 frame.
     base_height : int
         Images whose short side exceeds this are searched at the base scale
         ``short side / base_height`` (stages 8-10 always use full resolution).
@@ -151,7 +164,10 @@ class DetectorParams:
         Stage 10: fraction of the dictionary's correction capacity used (OpenCV: 0.6).
     """
 
-    passes: tuple[SearchPass, ...] = (SearchPass(1.0, 9), SearchPass(2.0, 9), SearchPass(4.0, 9, 4.0))
+    passes: tuple[SearchPass, ...] = (SearchPass(1.0, 9), SearchPass(2.0, 9), SearchPass(4.0, 9))
+    dark_passes: tuple[SearchPass, ...] = (SearchPass(1.0, 9), SearchPass(2.0, 9), SearchPass(4.0, 9, 4.0))
+    dark_mean: float = 50.0
+    erode: int = 0
     base_height: int = 540
     blur_sigma: float = 0.6
     offset: float = 7.0
@@ -286,11 +302,14 @@ class MarkerDetector:
         unknown = set(params) - names
         if unknown:
             raise TypeError(f"unknown detector parameter(s): {', '.join(sorted(unknown))}")
-        if "passes" in params:
-            params["passes"] = tuple(_as_pass(p) for p in params["passes"])  # type: ignore[union-attr]
+        for key in ("passes", "dark_passes"):
+            if key in params:
+                params[key] = tuple(_as_pass(p) for p in params[key])  # type: ignore[union-attr]
         self.params = replace(DetectorParams(), **params)  # type: ignore[arg-type]
-        if not self.params.passes:
-            raise ValueError("passes: at least one search pass is needed")
+        if not self.params.passes or not self.params.dark_passes:
+            raise ValueError("passes, dark_passes: at least one search pass is needed")
+        if isinstance(self.params.erode, bool) or not 0 <= self.params.erode <= 5:
+            raise ValueError(f"erode must be 0 to 5 px, got {self.params.erode!r}")
         lut = response_lut(self.params.response)  # a clear error now rather than at the first frame
         # the inverted image's grey level v holds the light 255 - lut[255 - v] of the original
         self._luts = {False: lut, True: 255.0 - lut[::-1]}
@@ -299,6 +318,9 @@ class MarkerDetector:
             raise ValueError(f"border_bits must be 1, 2 or 3, got {bb!r}")
         if self.params.inverted not in (False, True, "both") or not isinstance(self.params.inverted, (bool, str)):
             raise ValueError(f"inverted must be False, True or 'both', got {self.params.inverted!r}")
+        # each id's cells (1 = white) with its border, as seen at 0-3 quarter turns (decode's r)
+        codes = np.pad(self.dictionary.bits, ((0, 0), (bb, bb), (bb, bb)))
+        self._cells_seen = np.stack([np.rot90(codes, r, axes=(1, 2)) for r in range(4)], axis=1)
 
     def __repr__(self) -> str:
         return f"MarkerDetector({self.dictionary.name!r}, {self.params})"
@@ -338,8 +360,6 @@ class MarkerDetector:
                              border_distance=p.candidates.border_distance / scale.max())
         blurred = blur(work, p.blur_sigma)  # stage 2
         binary = threshold(blurred, window=window, offset=p.offset if sp.offset is None else sp.offset)  # stage 3
-        if sp.erode:  # stage 3b
-            binary = cv2.erode(binary, np.ones((sp.erode, sp.erode), np.uint8))
         # stage 4: a marker's frame encloses its white cells, so ink without a hole is no marker
         contours = enclosing_borders(binary, *perimeter_bounds(work.shape, candidates))
         return _PassImage(work.shape, scale, window, candidates, blurred, binary, contours)
@@ -358,9 +378,9 @@ class MarkerDetector:
         bb = p.border_bits
         n = self.dictionary.marker_size + 2 * bb
         cell_px = float(np.median(np.sqrt(np.abs(_areas(corners))))) / n
-        per_side = int(np.clip(np.ceil(cell_px), 4, 32))  # about a sample per pixel, 4-32 per cell
+        per_side = int(np.clip(np.ceil(cell_px / 2), 4, 32))  # a sample per 2 px of cell, 4-32
         white = cell_white_fractions(gray, corners, n, thr, per_side=per_side, margin=p.cell_margin)
-        expected = _expected_cells(self.dictionary.bits[ids], shift, bb)
+        expected = self._cells_seen[ids, (4 - shift) % 4]  # decode: observed = rot90(true, (4 - shift) % 4)
         wrong = np.where(expected == 1, 1.0 - white, white)
         confidence = 1.0 - wrong.reshape(len(wrong), -1).mean(axis=1)
         if p.bit_threshold is None:
@@ -373,16 +393,22 @@ class MarkerDetector:
                  & (bad[:, ~frame].sum(axis=1) <= int(self.dictionary.max_correction * p.error_correction_rate)))
         return confidence, clear
 
-    def _passes(self, gray: NDArray[np.uint8], base: float) -> Iterator[_PassImage]:
-        """Stages 2-4 of every search pass, in order; all but the first are computed on a
+    def _eroded(self, found: _PassImage) -> _PassImage:
+        """Stage 3b: stage 4 again on a pass's binary image with its ink eroded (``erode``)."""
+        binary = cv2.erode(found.binary, np.ones((self.params.erode,) * 2, np.uint8))
+        return replace(found, binary=binary,
+                       contours=enclosing_borders(binary, *perimeter_bounds(found.shape, found.candidates)))
+
+    def _passes(self, gray: NDArray[np.uint8], passes: list[SearchPass], base: float) -> Iterator[_PassImage]:
+        """Stages 2-4 of the search passes in order; all but the first are computed on a
         worker thread meanwhile, up to :data:`_THREAD_MAX_PIXELS` (beyond, OpenCV's own
         threads already keep both cores of the bench machine busy and the hand-over only
         adds to the slowest frames)."""
         if gray.size > _THREAD_MAX_PIXELS:
-            for sp in self.params.passes:
+            for sp in passes:
                 yield self._search(gray, sp, base)
             return
-        first, *rest = self.params.passes
+        first, *rest = passes
         later = [_pool().submit(self._search, gray, sp, base) for sp in rest]
         try:
             yield self._search(gray, first, base)
@@ -423,6 +449,13 @@ class MarkerDetector:
         """Stages 2-10 on a grey image in which the markers are black on white."""
         p = self.params
         base = max(1.0, min(gray.shape[:2]) / p.base_height)
+        passes = p.dark_passes if cv2.mean(gray)[0] < p.dark_mean else p.passes
+        return self._find(gray, self._passes(gray, list(passes), base), inverted, log)
+
+    def _find(self, gray: NDArray[np.uint8], searches: Iterator[_PassImage], inverted: bool,
+              log: dict | None) -> list[MarkerDetection]:
+        """Stages 5-10 on the candidates of the searches (stages 2-4), in order."""
+        p = self.params
         bb = p.border_bits
         n_cells = self.dictionary.marker_size + 2 * bb
         slack = int(self.dictionary.max_correction * p.error_correction_rate) + 1  # +1: lenient
@@ -430,9 +463,13 @@ class MarkerDetector:
         lo_white, hi_white = lo_white - slack, hi_white + slack
         cands = _Cands()
         seen = np.zeros((0, 4, 2))
-        for search in self._passes(gray, base):  # stages 2-4
+        first = True
+        while (search := next(searches, None)) is not None:  # stages 2-4
             scale = search.scale
             found = self._stage_5(search, seen, log)
+            if first and p.erode:  # stage 3b on the first pass, searched after the others
+                searches = itertools.chain(searches, [self._eroded(search)])
+            first = False
             if not found:
                 continue
             contours = [c for c, _ in found]
@@ -541,27 +578,13 @@ def _as_pass(p: object) -> SearchPass:
         raise ValueError(f"passes: window must be an odd integer >= 3, got {sp.window}")
     if sp.offset is not None and not np.isfinite(sp.offset):
         raise ValueError(f"passes: offset must be a finite number, got {sp.offset}")
-    if not 0 <= int(sp.erode) <= 5:
-        raise ValueError(f"passes: erode must be 0 to 5 px, got {sp.erode}")
     return SearchPass(float(sp.scale), None if sp.window is None else int(sp.window),
-                      None if sp.offset is None else float(sp.offset), int(sp.erode))
+                      None if sp.offset is None else float(sp.offset))
 
 
 def _note(log: dict | None, contour, scale, split, quad, cells, bits, det, stage: str) -> None:
     if log is not None:
         log["candidates"].append(CandidateTrace(contour, scale, split, quad, cells, bits, det, stage))
-
-
-def _expected_cells(codes: NDArray, shift: NDArray, border: int) -> NDArray[np.uint8]:
-    """The cells (K, n, n) each candidate should show, 1 = white: a black border ``border``
-    cells wide around the decoded codes (K, s, s), turned as :func:`decode` saw them."""
-    seen = np.empty_like(codes)
-    turns = (4 - shift) % 4  # decode: observed = rot90(true, turns)
-    for r in range(4):
-        pick = turns == r
-        if pick.any():
-            seen[pick] = np.rot90(codes[pick], r, axes=(1, 2))
-    return np.pad(seen, ((0, 0), (border, border), (border, border)))
 
 
 def _clockwise(quads: NDArray) -> NDArray:

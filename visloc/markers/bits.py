@@ -230,7 +230,7 @@ class BitRead(NamedTuple):
 
 def read_bits(
     sample: CellSample, border_error_rate: float = 0.35, min_contrast: float = 10.0, *, border: int = 1,
-    min_quiet_zone: float = 0.0,
+    min_quiet_zone: float = 0.0, shading: bool = False,
 ) -> BitRead:
     """Threshold the cells into bits and check the black border.
 
@@ -250,12 +250,22 @@ def read_bits(
         Least fraction of the ring cells just outside the border that must be white: a
         printed marker sits in a white quiet zone, a dark patch with bright specks in it
         (a star field, a pattern in shadow) does not.
+    shading : bool
+        Threshold each cell at a plane fitted to the grey levels of all cells and of the ring
+        (the marker's local mean level) instead of at one level: for light that changes across
+        the marker (glare, a shadow's edge, vignetting), where one threshold reads the cells
+        of the dim side as black.
     """
     cells = sample.cells
     k, n, _ = cells.shape
-    thr, dark, bright = otsu_threshold(np.concatenate([cells.reshape(k, -1), sample.ring], axis=1))
+    values = np.concatenate([cells.reshape(k, -1), sample.ring], axis=1)
+    thr, dark, bright = otsu_threshold(values)
     contrast = bright - dark
     t = thr[:, None, None]
+    if shading:  # a plane through every cell's and ring cell's mean: the local mid level
+        xy = _cell_centres(n)
+        fit = np.linalg.lstsq(np.c_[np.ones(len(xy)), xy], values.T, rcond=None)[0]  # (3, K)
+        t = (fit[0][:, None] + fit[1][:, None] * xy[: n * n, 0] + fit[2][:, None] * xy[: n * n, 1]).reshape(k, n, n)
     if sample.samples is not None and sample.samples.shape[-1] > 1:
         fraction = (sample.samples > t[..., None]).mean(axis=-1)
         white = np.where(fraction == 0.5, cells > t, fraction > 0.5)
@@ -269,8 +279,22 @@ def read_bits(
     if min_quiet_zone > 0:
         valid &= (sample.ring > thr[:, None]).mean(axis=1) >= min_quiet_zone
     inner = (slice(None), slice(border, -border), slice(border, -border))
-    margin = np.abs(cells[inner] - t).reshape(k, -1).min(axis=1) / np.maximum(0.5 * contrast, 1e-6)
+    margin = np.abs(cells[inner] - t[inner] if shading else cells[inner] - t).reshape(k, -1).min(axis=1)
+    margin = margin / np.maximum(0.5 * contrast, 1e-6)
     return BitRead(valid, white[inner].astype(np.uint8), np.minimum(margin, 1.0), contrast, thr)
+
+
+@lru_cache(maxsize=16)
+def _cell_centres(n: int) -> NDArray[np.float64]:
+    """(x, y) of the centres (n^2 + 4n + 4, 2), in cells, of the n x n cells then of the ring
+    around them, in :func:`sample_cells`' order."""
+    ii, jj = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    ring = [(-1, j) for j in range(-1, n + 1)] + [(n, j) for j in range(-1, n + 1)]
+    ring += [(i, -1) for i in range(n)] + [(i, n) for i in range(n)]
+    rc = np.concatenate([np.stack([ii.ravel(), jj.ravel()], axis=1), np.array(ring)]).astype(np.float64)
+    out = rc[:, ::-1] + 0.5
+    out.setflags(write=False)
+    return out
 
 
 def decode(

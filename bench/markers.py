@@ -40,7 +40,7 @@ from _results import fmt, write_results
 
 from visloc.markers import FAST_PASSES, MarkerDetector
 from visloc.pose import Camera, estimate_marker_pose, rotation_angle
-from visloc.synth import MARKER_LENGTH, random_scene
+from visloc.synth import MARKER_LENGTH, random_board_scene, random_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 SIZES = [(320, 240), (640, 480), (1280, 720)]
@@ -195,6 +195,55 @@ def run_rendered(size, methods, rounds, dict_name, sets, seed0, camera=True):
     return stats
 
 
+BOARD_SETS = {"camera-like easy": ("easy", True), "camera-like hard": ("hard", True),
+              "linear sharp": ("easy", False), "linear hard": ("hard", False)}
+
+
+def run_boards(rounds: int, n: int, seed0: int = 9) -> dict:
+    """AprilGrid-style boards (tags touching the grid's corner squares, Kalibr's layout;
+    :func:`visloc.synth.random_board_scene`), 640x480: recall (right id, every corner within
+    3 px of the truth), corner RMS and median ms per frame, interleaved. ``visloc_boards`` is
+    ``MarkerDetector(..., erode=2)`` (stage 3b); visloc reads the linear renders with
+    ``response="linear"``."""
+    frames = [(name, random_board_scene(np.random.default_rng([seed0, k, i]), difficulty=diff, camera=cam))
+              for k, (name, (diff, cam)) in enumerate(BOARD_SETS.items()) for i in range(n)]
+    methods = {(m, cam): MarkerDetector("DICT_APRILTAG_36h11", erode=e, response="srgb" if cam else "linear")
+               for m, e in (("visloc", 0), ("visloc_boards", 2)) for cam in (True, False)}
+    cv_det = opencv_detector("DICT_APRILTAG_36h11", False)
+    run = {m: (lambda img, cam, m=m: [(x.id, x.corners) for x in methods[m, cam].detect(img)])
+           for m in ("visloc", "visloc_boards")}
+    run["opencv"] = lambda img, cam: [] if (r := cv_det.detectMarkers(img))[1] is None else [
+        (int(i), c.reshape(4, 2).astype(np.float64)) for c, i in zip(r[0], r[1].ravel())]
+    times = {m: [] for m in run}
+    out = {m: [None] * len(frames) for m in run}
+    for r in range(rounds):
+        for k, (name, sc) in enumerate(frames):
+            for m in (list(run) if (r + k) % 2 == 0 else list(run)[::-1]):
+                t0 = time.perf_counter()
+                dets = run[m](sc.image, BOARD_SETS[name][1])
+                times[m].append(time.perf_counter() - t0)
+                out[m][k] = dets
+    stats = {}
+    for m in run:
+        per = {}
+        for name in BOARD_SETS:
+            found = total = 0
+            errs = []
+            for k, (set_name, sc) in enumerate(frames):
+                if set_name != name:
+                    continue
+                truth = {t.id: t.corners for t in sc.markers if t.visible}
+                total += len(truth)
+                for mid, c in out[m][k]:
+                    if mid in truth and np.abs(c - truth[mid]).max() < 3:
+                        found += 1
+                        errs.extend(np.sqrt(((c - truth[mid]) ** 2).sum(axis=1)))
+            per[name] = {"found": found, "tags": total, "recall": found / total if total else None,
+                         "corner_rms_px": float(np.sqrt(np.mean(np.square(errs)))) if errs else None}
+        stats[m] = {"ms_median": 1e3 * float(np.median(times[m])), "sets": per}
+    return stats
+
+
 #: the detector's stage functions whose time :func:`stage_times` measures, in pipeline order
 STAGES = {"blur": "2 blur", "threshold": "3 threshold", "enclosing_borders": "4 contours",
           "filter_candidates": "5 filter", "fit_quads": "6-7 corner split + line fits",
@@ -263,6 +312,16 @@ def markdown(result) -> str:
                 lines.append("| " + " | ".join([*head, name, fmt(s["recall"]), fmt(s["false_positives_per_frame"], 2),
                                                  fmt(s["corner_rms_px"]), fmt(s["corner_median_px"]), fmt(s["rot_err_median_deg"], 2),
                                                  fmt(s["trans_err_median_pct"], 2), fmt(s["flip_rate"], 3)]) + " |")
+    if result.get("boards"):
+        lines.append("\n**AprilGrid-style boards**, 640x480 DICT_APRILTAG_36h11 (tags touching the grid's corner "
+                     "squares; found = right id and every corner within 3 px; `visloc_boards` = `erode=2`)\n")
+        lines.append("| method | ms/frame | set | found | recall | corner RMS px |")
+        lines.append("|---|---|---|---|---|---|")
+        for m, st in result["boards"].items():
+            for k, (name, r) in enumerate(st["sets"].items()):
+                head = (m, fmt(st["ms_median"], 2)) if k == 0 else ("", "")
+                lines.append(f"| {head[0]} | {head[1]} | {name} | {r['found']}/{r['tags']} | {fmt(r['recall'])} | "
+                             f"{fmt(r['corner_rms_px'])} |")
     if result.get("stages"):
         sizes = list(result["stages"])
         lines.append("\n**Where visloc's time goes** (mean ms per frame in each stage over the same camera-like "
@@ -300,6 +359,8 @@ def main(argv=None) -> int:
     lin_sets = {k: v for k, v in sets.items() if k in ("easy", "hard", "small")}
     result["rendered"][key] = run_rendered((640, 480), make_methods("DICT_4X4_50", False, "linear"), args.rounds,
                                            "DICT_4X4_50", lin_sets, 1, camera=False)
+    print("AprilGrid boards ...", file=sys.stderr, flush=True)
+    result["boards"] = run_boards(args.rounds, 4 if args.quick else 12)
     result["stages"] = {f"{w}x{h}": stage_times((w, h), sets, 1) for w, h in sizes}
     for at in _APRILTAG:
         at.close()

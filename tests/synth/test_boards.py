@@ -143,3 +143,9 @@ def test_bad_types_and_scene_arguments():
         random_board_scene(0, difficulty="small")
     with pytest.raises(ValueError, match="size"):
         random_board_scene(0, size=(120, 120))
+
+
+def test_a_board_that_just_fits_is_placed():
+    # this seed draws a board 2 half-extents + 8 px high: the centre's range used to be empty
+    scene = random_board_scene(np.random.default_rng([9, 1, 8]), camera=False)
+    assert all(m.visible for m in scene.markers)

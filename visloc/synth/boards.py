@@ -276,7 +276,7 @@ def _place_board(rng: np.random.Generator, K: FloatArray, size: tuple[int, int],
         tag_px = float(rng.uniform(lo, hi))
         depth = f * L / tag_px
         half = 0.5 * diag * tag_px
-        if 2.0 * half + 8.0 > min(w, h):
+        if 2.0 * half + 10.0 > min(w, h):  # room for the centre draws below
             continue
         uv = np.array([rng.uniform(half + 4.0, w - 5.0 - half),
                        rng.uniform(half + 4.0, h - 5.0 - half)])

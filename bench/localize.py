@@ -2,7 +2,9 @@
 
 The same rendered 320x240 bottom-camera frames (AR.Drone 2.0 intrinsics) of a 6 x 6 grid of
 DICT_4X4_50 markers (10 cm, 5 cm apart) on gravel, 0.6-1.6 m above it, tilts up to 20 deg, any
-yaw, mild blur and noise (and a harder set with more blur, noise and dim light):
+yaw, through a camera model (``visloc.synth.camera.CameraEffects``: linear light, optics blur,
+sensor noise, vignetting, the sRGB curve; no lens distortion, as the camera file has none), and
+a harder set with more blur, motion blur, noise and dim light:
 
 - ``visloc``: ``MarkerDetector`` + ``estimate_camera_pose`` (joint Gauss-Newton over all
   corners, from the best single-marker pose, inconsistent markers dropped);
@@ -31,7 +33,8 @@ from visloc.markers import MarkerDetector
 from visloc.pose import Camera
 from visloc.pose.map_pose import estimate_camera_pose
 from visloc.pose.maps import GridMap
-from visloc.synth.grid import random_map_view
+from visloc.synth.camera import CameraEffects
+from visloc.synth.grid import FLIGHT_CAMERA, random_map_view
 
 ROOT = Path(__file__).resolve().parents[1]
 K = np.array([[320.067, 0, 159.5], [0, 320.067, 119.5], [0, 0, 1]])
@@ -75,9 +78,10 @@ def methods(grid):
 def run(n, rounds, hard):
     grid = GridMap(6, 6, 0.10, 0.05)
     rng = np.random.default_rng(7 if hard else 3)
-    opts = ({"blur_sigma": 1.2, "noise_sigma": 5.0, "gain": 0.5, "motion_blur": 3.0} if hard
-            else {"blur_sigma": 0.5, "noise_sigma": 1.5})
-    views = [random_map_view(rng, grid, K, (320, 240), "DICT_4X4_50", background="gravel", **opts) for _ in range(n)]
+    camera = (CameraEffects(blur_sigma=1.2, motion_blur=3.0, read_noise=4.0, exposure=0.5, k1=0.0, jpeg_quality=None)
+              if hard else FLIGHT_CAMERA)
+    views = [random_map_view(rng, grid, K, (320, 240), "DICT_4X4_50", background="gravel", camera=camera)
+             for _ in range(n)]
     ms = methods(grid)
     times = {m: [] for m in ms}
     out = {m: [None] * n for m in ms}

@@ -267,8 +267,10 @@ def read_bits(
         fit = np.linalg.lstsq(np.c_[np.ones(len(xy)), xy], values.T, rcond=None)[0]  # (3, K)
         t = (fit[0][:, None] + fit[1][:, None] * xy[: n * n, 0] + fit[2][:, None] * xy[: n * n, 1]).reshape(k, n, n)
     if sample.samples is not None and sample.samples.shape[-1] > 1:
-        fraction = (sample.samples > t[..., None]).mean(axis=-1)
-        white = np.where(fraction == 0.5, cells > t, fraction > 0.5)
+        m = sample.samples.shape[-1]
+        # whole grey levels: v > t exactly when v > floor(t), compared in integers
+        above = np.count_nonzero(sample.samples > np.floor(t).astype(np.int16)[..., None], axis=-1)
+        white = np.where(2 * above == m, cells > t, 2 * above > m)
     else:
         white = cells > t
     frame = np.ones((n, n), bool)

@@ -101,8 +101,8 @@ class DetectorParams:
         The searches of frames whose mean grey level is below ``dark_mean``. In a frame of
         mean grey below 30 the sRGB curve turns a little sensor noise into tens of grey levels
         on black, and the black border breaks up at the finer scales; the default's last
-        pass, on the image shrunk 4 times, thresholds with an offset of 4 instead of 7 (on
-        brighter frames that offset lets texture through as candidates, at a cost of about
+        passes, on the image shrunk 4 and 3 times, threshold with an offset of 4 instead of 7
+        (on brighter frames that offset lets texture through as candidates, at a cost of about
         0.4 ms per 640 x 480 frame).
     dark_mean : float
         Mean grey level below which a frame is searched with ``dark_passes``.
@@ -169,7 +169,8 @@ class DetectorParams:
     """
 
     passes: tuple[SearchPass, ...] = (SearchPass(1.0, 9), SearchPass(1.5, 11), SearchPass(4.0, 9))
-    dark_passes: tuple[SearchPass, ...] = (SearchPass(1.0, 9), SearchPass(1.5, 11), SearchPass(4.0, 9, 4.0))
+    dark_passes: tuple[SearchPass, ...] = (SearchPass(1.0, 9), SearchPass(1.5, 11), SearchPass(4.0, 9, 4.0),
+                                           SearchPass(3.0, 9, 4.0))
     dark_mean: float = 50.0
     erode: int = 0
     base_height: int = 540

@@ -27,7 +27,6 @@ the whole path twice, once per polarity.
 
 from __future__ import annotations
 
-import itertools
 import os
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
@@ -405,20 +404,24 @@ class MarkerDetector:
                        contours=enclosing_borders(binary, *perimeter_bounds(found.shape, found.candidates)))
 
     def _passes(self, gray: NDArray[np.uint8], passes: list[SearchPass], base: float) -> Iterator[_PassImage]:
-        """Stages 2-4 of the search passes in order; all but the first are computed on a
-        worker thread meanwhile, up to :data:`_THREAD_MAX_PIXELS` (beyond, OpenCV's own
-        threads already keep both cores of the bench machine busy and the hand-over only
-        adds to the slowest frames)."""
-        if gray.size > _THREAD_MAX_PIXELS:
-            for sp in passes:
-                yield self._search(gray, sp, base)
-            return
-        first, *rest = passes
-        later = [_pool().submit(self._search, gray, sp, base) for sp in rest]
+        """Stages 2-4 of the search passes in order, then (``erode``) stage 3b on the first
+        pass's binary image. All passes but the first are computed on a worker thread
+        meanwhile, up to :data:`_THREAD_MAX_PIXELS` (beyond, OpenCV's own threads already
+        keep both cores of the bench machine busy and the hand-over only adds to the slowest
+        frames)."""
+        first_pass, *rest = passes
+        threaded = gray.size <= _THREAD_MAX_PIXELS
+        later = [_pool().submit(self._search, gray, sp, base) for sp in rest] if threaded else []
         try:
-            yield self._search(gray, first, base)
+            first = self._search(gray, first_pass, base)
+            yield first
             for job in later:
                 yield job.result()
+            if not threaded:
+                for sp in rest:
+                    yield self._search(gray, sp, base)
+            if self.params.erode:
+                yield self._eroded(first)
         finally:
             for job in later:
                 job.cancel()
@@ -468,13 +471,9 @@ class MarkerDetector:
         lo_white, hi_white = lo_white - slack, hi_white + slack
         cands = _Cands()
         seen = np.zeros((0, 4, 2))
-        first = True
-        while (search := next(searches, None)) is not None:  # stages 2-4
+        for search in searches:  # stages 2-4 (and 3b)
             scale = search.scale
             found = self._stage_5(search, seen, log)
-            if first and p.erode:  # stage 3b on the first pass, searched after the others
-                searches = itertools.chain(searches, [self._eroded(search)])
-            first = False
             if not found:
                 continue
             contours = [c for c, _ in found]

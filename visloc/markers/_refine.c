@@ -180,6 +180,18 @@ static int curved_corners(const double cur[8], const double normal[4][2], const 
  * refine.bend_corners. `work` holds 4 BEND_COUNT (5 + 2 r + 1) doubles. */
 #define BEND_COUNT 40
 #define BEND_GAP 0.08
+/* Markers with no side this long (px) keep straight sides: a lens bends a short side by a
+ * small fraction of a pixel (the bend grows with the square of the length). */
+#define BEND_MIN_SIDE 40.0
+
+static double longest_side(const double q[8]) {
+    double best = 0;
+    for (int s = 0; s < 4; s++) {
+        double d = hypot(q[2 * ((s + 1) % 4)] - q[2 * s], q[2 * ((s + 1) % 4) + 1] - q[2 * s + 1]);
+        if (d > best) best = d;
+    }
+    return best;
+}
 static void bend_one(const image *im, double q[8], int64_t r, double *work) {
     const int64_t width = 2 * r + 1, n = BEND_COUNT, n4 = 4 * BEND_COUNT;
     double *p_in = work, *p_out = work + n4, *sorted = work + 2 * n4, *off = work + 3 * n4, *w = work + 4 * n4;
@@ -367,7 +379,7 @@ static PyObject *refine_quads(PyObject *self, PyObject *args) {
             Py_BEGIN_ALLOW_THREADS
             for (Py_ssize_t i = 0; i < k; i++) {
                 flag[i] = (uint8_t)refine_one(&im, c + 8 * i, rad[i], iterations, count, end_gap, work);
-                if (flag[i] && bend) bend_one(&im, c + 8 * i, rad[i], work); /* stage 8b */
+                if (flag[i] && bend && longest_side(c + 8 * i) >= BEND_MIN_SIDE) bend_one(&im, c + 8 * i, rad[i], work);
             }
             Py_END_ALLOW_THREADS
             result = Py_BuildValue("(OO)", corners, ok);

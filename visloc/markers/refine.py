@@ -43,6 +43,7 @@ NATIVE_REFINE = _refine is not None
 
 _END_GAP = 0.15  # fraction of each side left out at both ends (sample_edge_profiles)
 _LEVELS = np.arange(256, dtype=np.float64)
+_BEND_MIN_SIDE = 40.0  # px: markers with shorter sides keep them straight (as _refine.c)
 
 __all__ = ["NATIVE_REFINE", "bend_corners", "edge_offsets", "refine_quads", "sample_edge_profiles"]
 
@@ -154,8 +155,9 @@ def refine_quads(
         edges are measured in linear intensity. ``"srgb"`` suits camera images and most
         files, ``"linear"`` linear sensor data and linear renders.
     bend : bool
-        Stage 8b on the refined quads: the corners where the sides, fitted as quadratic
-        curves, meet (:func:`bend_corners`, compiled alongside stage 8).
+        Stage 8b on the refined quads with a side of 40 px or more: the corners where the
+        sides, fitted as quadratic curves, meet (:func:`bend_corners`, compiled alongside
+        stage 8).
     native : bool or None
         Run the compiled version (``True``) or the numpy one (``False``); ``None``: the
         compiled one when it was built (:data:`NATIVE_REFINE`).
@@ -226,8 +228,10 @@ def refine_quads(
         ok_all &= move <= max_move  # False for NaN too
         q[ok_all] = new[ok_all]
     q[~ok_all] = q0[~ok_all]
-    if bend and ok_all.any():
-        q[ok_all] = bend_corners(gray, q[ok_all], radius=r[ok_all], response=response)
+    long_side = np.linalg.norm(q[:, _NEXT] - q, axis=2).max(axis=1) >= _BEND_MIN_SIDE
+    if bend and (ok_all & long_side).any():  # short sides bend by a small fraction of a pixel
+        pick = ok_all & long_side
+        q[pick] = bend_corners(gray, q[pick], radius=r[pick], response=response)
     return q, ok_all
 
 

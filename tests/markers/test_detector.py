@@ -11,7 +11,7 @@ from visloc.markers import MarkerDetector
 from visloc.markers.contours import CandidateFilter, perimeter_bounds
 from visloc.markers.explain import write_explain
 from visloc.synth import default_camera, random_scene, render_markers
-from visloc.synth.camera import CameraEffects
+from visloc.synth.camera import CameraEffects, srgb_encode
 from visloc.types import Pose
 
 
@@ -254,8 +254,7 @@ def _sheet(ids, border_bits=1, cell=12, invert=False):
         img[y0 : y0 + side, x0 : x0 + side] = cv2.aruco.generateImageMarker(d, i, side, borderBits=border_bits)
         corners[i] = np.array([[x0, y0], [x0 + side, y0], [x0 + side, y0 + side], [x0, y0 + side]]) - 0.5
     light = cv2.GaussianBlur((255 - img if invert else img).astype(np.float64) / 255, (0, 0), 0.7)
-    encoded = np.where(light <= 0.0031308, 12.92 * light, 1.055 * light ** (1 / 2.4) - 0.055)
-    return np.round(255 * encoded).astype(np.uint8), corners
+    return np.round(255 * srgb_encode(light)).astype(np.uint8), corners
 
 
 @pytest.mark.parametrize("border_bits", [2, 3])

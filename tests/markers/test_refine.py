@@ -4,6 +4,7 @@ import pytest
 
 from tests.conftest import render_square
 from visloc.markers.refine import NATIVE_REFINE, edge_offsets, refine_quads, sample_edge_profiles
+from visloc.synth.camera import srgb_encode
 
 ENGINES = [False, True] if NATIVE_REFINE else [False]  # numpy, and the compiled one when built
 
@@ -44,11 +45,6 @@ def test_refine_recovers_subpixel_corners(blur, native, rng):
         assert err < 0.06, err
 
 
-def _srgb_encode(linear):
-    v = np.clip(np.asarray(linear, np.float64) / 255.0, 0.0, 1.0)
-    return 255.0 * np.where(v <= 0.0031308, 12.92 * v, 1.055 * v ** (1 / 2.4) - 0.055)
-
-
 @pytest.mark.parametrize("native", ENGINES)
 @pytest.mark.parametrize("blur", [0.8, 1.5])
 def test_refine_measures_edges_in_linear_light_on_srgb_images(blur, native, rng):
@@ -62,7 +58,7 @@ def test_refine_measures_edges_in_linear_light_on_srgb_images(blur, native, rng)
         truth = c + np.array([[-1, -1], [1, -1], [1, 1], [-1, 1.0]]) * rng.uniform(15, 25) @ rot.T
         linear = render_square((100, 100), truth, dark=3, bright=200, blur=0).astype(np.float64)
         linear = cv2.GaussianBlur(linear, (0, 0), blur)
-        img = np.round(_srgb_encode(linear)).astype(np.uint8)
+        img = np.round(255 * srgb_encode(linear / 255)).astype(np.uint8)
         start = truth + rng.uniform(-0.8, 0.8, (4, 2))
         for response, errs in (("srgb", srgb_err), ("linear", linear_err)):
             out, ok = refine_quads(img, start[None], radius=3, iterations=3, response=response, native=native)
@@ -78,7 +74,7 @@ def test_dark_low_contrast_squares_refine_through_the_srgb_response(native):
     # but the contrast test counts grey levels, so the square still refines
     cover = render_square((80, 80), [[20, 20], [60, 20], [60, 60], [20, 60]], dark=0, bright=255) / 255.0
     linear = cv2.GaussianBlur(0.6 + (3.8 - 0.6) * cover, (0, 0), 0.8)
-    img = np.round(_srgb_encode(linear)).astype(np.uint8)
+    img = np.round(255 * srgb_encode(linear / 255)).astype(np.uint8)
     assert 6 <= img.min() and img.max() <= 35
     out, ok = refine_quads(img, np.array([[[20.6, 19.5], [59.5, 20.4], [60.3, 60.5], [19.6, 59.6]]]), radius=3,
                            native=native)

@@ -112,6 +112,17 @@ static double select_rank(double *v, int64_t n, int64_t k) {
     return v[k];
 }
 
+/* The edge on a profile of 2 r + 1 samples, relative to its centre, px, positive outward:
+ * refine.py's area of the step normalised between lo and lo + span. */
+static double step_offset(const double *pr, int64_t width, double lo, double span, int64_t r) {
+    double area = 0;
+    for (int64_t o = 0; o < width; o++) {
+        double v = (pr[o] - lo) / span;
+        area += v < 0 ? 0 : (v > 1 ? 1 : v);
+    }
+    return (double)r + 0.5 - area;
+}
+
 /* Weighted least-squares fit of off = c0 + c1 t + c2 t^2 (c2 = 0 unless the curvature is over
  * 3 standard errors: a straight, noisy edge stays a line); 0 when the system is singular. */
 static int fit_curve(const double *t, const double *off, const double *w, int64_t n, double c[3]) {
@@ -220,14 +231,8 @@ static void bend_one(const image *im, double q[8], int64_t r, double *work) {
     double span = hi - lo > 1e-6 ? hi - lo : 1e-6, cf[4][3], out[8];
     for (int s = 0; s < 4; s++) {
         for (int64_t m = 0; m < n; m++) {
-            const double *pr = prof + (s * n + m) * width;
-            double area = 0;
-            for (int64_t o = 0; o < width; o++) {
-                double v = (pr[o] - lo) / span;
-                area += v < 0 ? 0 : (v > 1 ? 1 : v);
-            }
             int64_t j = s * n + m;
-            off[j] = (double)r + 0.5 - area;
+            off[j] = step_offset(prof + j * width, width, lo, span, r);
             w[j] = (p_out[j] - p_in[j]) > 0.5 * (hi - lo) && fabs(off[j]) < (double)r;
         }
         double *o = off + s * n, *ws = w + s * n;
@@ -292,13 +297,7 @@ static int refine_one(const image *im, double q[8], int64_t r, int iterations, i
             int64_t n_good = 0;
             double *px = ex + s * count, *py = ey + s * count, *w = wt + s * count;
             for (int64_t m = 0; m < count; m++) {
-                const double *pr = prof + (s * count + m) * width;
-                double area = 0;
-                for (int64_t o = 0; o < width; o++) {
-                    double v = (pr[o] - lo) / span;
-                    area += v < 0 ? 0 : (v > 1 ? 1 : v);
-                }
-                double e = (double)r + 0.5 - area; /* refine.py: area of the normalised step */
+                double e = step_offset(prof + (s * count + m) * width, width, lo, span, r);
                 int j = s * count + m;
                 w[m] = (p_out[j] - p_in[j]) > 0.5 * (hi - lo) && fabs(e) < (double)r;
                 n_good += w[m] > 0;

@@ -124,6 +124,29 @@ def edge_offsets(profiles: NDArray, black: NDArray | float, white: NDArray | flo
     return radius + 0.5 - v.sum(axis=-1)
 
 
+def _step_offsets(prof: NDArray, r: NDArray, big: int) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """The edge on each profile (K, 4, M, 2 big + 1) of quads with profile half-widths ``r``
+    (K,), from the area of the normalised step (module docstring), as offsets (K, 4, M) from
+    the profile centres; which profiles crossed a clean step (occlusion or a neighbouring
+    edge makes outliers); and each quad's black and white levels (K,): the medians (upper
+    middle) of its innermost and outermost samples. ``prof`` is normalised in place."""
+    k, m = len(prof), prof.shape[2]
+    kk = np.arange(k)
+    half = 2 * m  # of the 4 m inner (outer) end samples of each quad
+    p_in = prof[kk, :, :, big - r]  # (K, 4, M): copies, read before the normalisation
+    p_out = prof[kk, :, :, big + r]
+    lo = np.partition(p_in.reshape(k, -1), half, axis=1)[:, half]
+    hi = np.partition(p_out.reshape(k, -1), half, axis=1)[:, half]
+    prof -= lo[:, None, None, None]  # (I - black) / (white - black), clipped to [0, 1]
+    prof /= np.maximum(hi - lo, 1e-6)[:, None, None, None]
+    np.clip(prof, 0.0, 1.0, out=prof)
+    inside = (np.abs(np.arange(-big, big + 1))[None, :] <= r[:, None]).astype(np.float32)[:, None, None, :]
+    r3 = r[:, None, None].astype(np.float64)
+    e = r3 + 0.5 - np.vecdot(prof, inside)
+    good = ((p_out - p_in) > 0.5 * (hi - lo)[:, None, None]) & (np.abs(e) < r3)
+    return e, good, lo, hi
+
+
 def refine_quads(
     gray: NDArray[np.uint8],
     quads: NDArray,
@@ -190,26 +213,11 @@ def refine_quads(
         return np.frombuffer(raw, np.float64).reshape(k, 4, 2).copy(), np.frombuffer(raw_ok, np.uint8).astype(bool)
     light = _to_light(gray, response)
     big = int(r.max())
-    inside = (np.abs(np.arange(-big, big + 1))[None, :] <= r[:, None]).astype(np.float32)[:, None, None, :]
-    kk = np.arange(k)
-    r4 = r[:, None, None].astype(np.float64)
     max_move = 2.0 * r + 1
     ok_all = np.ones(k, bool)
-    half = 2 * count  # median of the 4 * count inner (outer) end samples of each quad
     for it in range(iterations):
         base, normals, prof = sample_edge_profiles(light, q, big, count, _END_GAP)
-        p_in = prof[kk, :, :, big - r]  # (K, 4, M): each quad's innermost sample
-        p_out = prof[kk, :, :, big + r]
-        lo = np.partition(p_in.reshape(k, -1), half, axis=1)[:, half]
-        hi = np.partition(p_out.reshape(k, -1), half, axis=1)[:, half]
-        span = np.maximum(hi - lo, 1e-6)[:, None, None, None]
-        v = prof  # normalised in place: (I - black) / (white - black), clipped to [0, 1]
-        v -= lo[:, None, None, None]
-        v /= span
-        np.clip(v, 0.0, 1.0, out=v)
-        e = r4 + 0.5 - np.vecdot(v, inside)  # module docstring: area of the normalised step
-        # profiles that did not cross a clean step (occlusion, neighbouring edge) are outliers
-        good = ((p_out - p_in) > 0.5 * (hi - lo)[:, None, None]) & (np.abs(e) < r4)
+        e, good, lo, hi = _step_offsets(prof, r, big)
         pts = (base + e[..., None] * normals[:, :, None, :]).reshape(k * 4, count, 2)
         w = good.reshape(k * 4, count).astype(np.float64)
         lines = fit_lines(pts, w)
@@ -285,14 +293,8 @@ def bend_corners(
     x1, y1 = np.minimum((np.ceil(q.reshape(-1, 2).max(axis=0)) + big + 3).astype(int), [w_img, h])
     light = _to_light(gray[y0:y1, x0:x1], response)
     _, normals, prof = sample_edge_profiles(light, q - [x0, y0], big, count, end_gap)
-    kk = np.arange(k)
-    p_in, p_out = prof[kk, :, :, big - r], prof[kk, :, :, big + r]
-    lo, hi = np.median(p_in.reshape(k, -1), axis=1), np.median(p_out.reshape(k, -1), axis=1)
-    span = np.maximum(hi - lo, 1e-6)[:, None, None, None]
-    inside = (np.abs(np.arange(-big, big + 1))[None, :] <= r[:, None]).astype(np.float32)[:, None, None, :]
-    v = np.clip((prof - lo[:, None, None, None]) / span, 0.0, 1.0)
-    e = r[:, None, None] + 0.5 - np.vecdot(v, inside)  # offset of the edge from the side, px
-    w = (((p_out - p_in) > 0.5 * (hi - lo)[:, None, None]) & (np.abs(e) < r[:, None, None])).astype(np.float64)
+    e, good, _, _ = _step_offsets(prof, r, big)  # offsets of the edge from the sides, px
+    w = good.astype(np.float64)
     t = np.linspace(end_gap, 1 - end_gap, count)
     basis = np.stack([np.ones(count), t, t * t], axis=-1)  # (M, 3)
     coef = np.zeros((k, 4, 3))

@@ -29,7 +29,7 @@ from visloc.synth._checks import check_camera, check_int, check_number, check_si
 from visloc.synth.camera import CameraEffects
 from visloc.synth.markers import (
     MarkerRender,
-    _check_camera_effects,
+    _check_degradations,
     _composite_exact,
     _finish,
     _ideal_background,
@@ -208,21 +208,9 @@ def render_aprilgrid(
     if n > len(dic):
         raise ValueError(f"rows * cols must be at most {len(dic)} ({dic.name}), got {n}")
     first_id = check_int(first_id, "first_id", low=0, high=len(dic) - n)
-    blur_sigma = check_number(blur_sigma, "blur_sigma", low=0.0)
-    motion_blur = check_number(motion_blur, "motion_blur", low=0.0)
-    motion_angle = check_number(motion_angle, "motion_angle")
-    noise_sigma = check_number(noise_sigma, "noise_sigma", low=0.0)
-    gain = check_number(gain, "gain", low=0.0, low_open=True)
-    gradient = check_number(gradient, "gradient", low=0.0, high=1.0, high_open=True)
-    if jpeg_quality is not None:
-        jpeg_quality = check_int(jpeg_quality, "jpeg_quality", low=1, high=100)
-    if rng is not None and not isinstance(rng, (np.random.Generator, int, np.integer)):
-        raise TypeError(f"rng must be a numpy Generator, an int seed or None, got {type(rng).__name__}")
-    gen = np.random.default_rng(rng)
-    if camera is not None:
-        _check_camera_effects(camera, blur_sigma=blur_sigma, motion_blur=motion_blur,
-                              motion_angle=motion_angle, noise_sigma=noise_sigma, gain=gain,
-                              gradient=gradient, jpeg_quality=jpeg_quality)
+    deg, gen = _check_degradations(camera, rng, blur_sigma=blur_sigma, motion_blur=motion_blur,
+                                   motion_angle=motion_angle, noise_sigma=noise_sigma, gain=gain,
+                                   gradient=gradient, jpeg_quality=jpeg_quality)
 
     s = spacing_ratio * L
     ids = list(range(first_id, first_id + n))
@@ -245,10 +233,7 @@ def render_aprilgrid(
         "board_rvec": [float(v) for v in pose.rvec],
         "board_tvec": [float(v) for v in t],
     }
-    return _finish(canvas, k, k_ideal, (w, h), markers, dic.name, params, camera, gen,
-                   blur_sigma=blur_sigma, motion_blur=motion_blur, motion_angle=motion_angle,
-                   noise_sigma=noise_sigma, gain=gain, gradient=gradient,
-                   jpeg_quality=jpeg_quality)
+    return _finish(canvas, k, k_ideal, (w, h), markers, dic.name, params, camera, gen, **deg)
 
 
 def _board_extent(rows: int, cols: int, L: float, s: float) -> FloatArray:

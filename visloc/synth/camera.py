@@ -27,6 +27,7 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from visloc.markers.response import srgb_to_linear
 from visloc.synth._checks import check_camera, check_int, check_number, check_size
 from visloc.synth.textures import motion_kernel
 
@@ -142,8 +143,7 @@ def srgb_decode(v: ArrayLike) -> FloatArray:
     ndarray float64
         ``v / 12.92`` for ``v <= 0.04045``, else ``((v + 0.055) / 1.055)^2.4``.
     """
-    v = np.clip(np.asarray(v, dtype=np.float64), 0.0, 1.0)
-    return np.where(v <= 0.04045, v / 12.92, np.power((v + 0.055) / 1.055, 2.4))
+    return srgb_to_linear(np.clip(np.asarray(v, dtype=np.float64), 0.0, 1.0))
 
 
 def _normalise(points: FloatArray, K: FloatArray) -> tuple[FloatArray, FloatArray]:

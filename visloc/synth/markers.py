@@ -353,21 +353,9 @@ def render_markers(
     if supersample is not None:
         supersample = check_int(supersample, "supersample", low=1, high=32)
     margin_cells = check_number(margin_cells, "margin_cells", low=0.0)
-    blur_sigma = check_number(blur_sigma, "blur_sigma", low=0.0)
-    motion_blur = check_number(motion_blur, "motion_blur", low=0.0)
-    motion_angle = check_number(motion_angle, "motion_angle")
-    noise_sigma = check_number(noise_sigma, "noise_sigma", low=0.0)
-    gain = check_number(gain, "gain", low=0.0, low_open=True)
-    gradient = check_number(gradient, "gradient", low=0.0, high=1.0, high_open=True)
-    if jpeg_quality is not None:
-        jpeg_quality = check_int(jpeg_quality, "jpeg_quality", low=1, high=100)
-    if rng is not None and not isinstance(rng, (np.random.Generator, int, np.integer)):
-        raise TypeError(f"rng must be a numpy Generator, an int seed or None, got {type(rng).__name__}")
-    gen = np.random.default_rng(rng)
-    if camera is not None:
-        _check_camera_effects(camera, blur_sigma=blur_sigma, motion_blur=motion_blur,
-                              motion_angle=motion_angle, noise_sigma=noise_sigma, gain=gain,
-                              gradient=gradient, jpeg_quality=jpeg_quality)
+    deg, gen = _check_degradations(camera, rng, blur_sigma=blur_sigma, motion_blur=motion_blur,
+                                   motion_angle=motion_angle, noise_sigma=noise_sigma, gain=gain,
+                                   gradient=gradient, jpeg_quality=jpeg_quality)
     bg, bg_name, k_ideal = _ideal_background(k, (w, h), background, camera, gen)
     markers = [_marker_truth(k, (w, h), camera, marker_id, pose, length)
                for marker_id, pose, length in items]
@@ -389,10 +377,7 @@ def render_markers(
         canvas = canvas.reshape(hc, s, wc, s).astype(np.float64).mean(axis=(1, 3))
 
     params = {"background": bg_name, "supersample": supersample, "margin_cells": margin_cells}
-    return _finish(canvas, k, k_ideal, (w, h), markers, dic.name, params, camera, gen,
-                   blur_sigma=blur_sigma, motion_blur=motion_blur, motion_angle=motion_angle,
-                   noise_sigma=noise_sigma, gain=gain, gradient=gradient,
-                   jpeg_quality=jpeg_quality)
+    return _finish(canvas, k, k_ideal, (w, h), markers, dic.name, params, camera, gen, **deg)
 
 
 def _ideal_background(
@@ -466,6 +451,28 @@ def _finish(canvas: FloatArray, k: FloatArray, k_ideal: FloatArray, size: tuple[
         return MarkerRender(image, markers, k, dictionary, params)
     params["camera"] = camera_params
     return MarkerRender(image, markers, k, dictionary, params, camera.dist)
+
+
+def _check_degradations(camera: object, rng: object, *, blur_sigma: object, motion_blur: object,
+                        motion_angle: object, noise_sigma: object, gain: object, gradient: object,
+                        jpeg_quality: object) -> tuple[dict, np.random.Generator]:
+    """The renderers' degradation arguments checked (a ValueError or TypeError naming the
+    one at fault; with ``camera`` they must keep their defaults), and the generator of
+    ``rng``."""
+    deg = {
+        "blur_sigma": check_number(blur_sigma, "blur_sigma", low=0.0),
+        "motion_blur": check_number(motion_blur, "motion_blur", low=0.0),
+        "motion_angle": check_number(motion_angle, "motion_angle"),
+        "noise_sigma": check_number(noise_sigma, "noise_sigma", low=0.0),
+        "gain": check_number(gain, "gain", low=0.0, low_open=True),
+        "gradient": check_number(gradient, "gradient", low=0.0, high=1.0, high_open=True),
+        "jpeg_quality": None if jpeg_quality is None else check_int(jpeg_quality, "jpeg_quality", low=1, high=100),
+    }
+    if rng is not None and not isinstance(rng, (np.random.Generator, int, np.integer)):
+        raise TypeError(f"rng must be a numpy Generator, an int seed or None, got {type(rng).__name__}")
+    if camera is not None:
+        _check_camera_effects(camera, **deg)
+    return deg, np.random.default_rng(rng)
 
 
 def _check_camera_effects(camera: object, **degradations: object) -> None:

@@ -245,8 +245,8 @@ def run_boards(rounds: int, n: int, seed0: int = 9) -> dict:
 
 
 #: the detector's stage functions whose time :func:`stage_times` measures, in pipeline order
-STAGES = {"blur": "2 blur", "threshold": "3 threshold", "enclosing_borders": "4 contours",
-          "filter_candidates": "5 filter", "fit_quads": "6-7 corner split + line fits",
+STAGES = {"blur": "2 blur", "threshold": "3 threshold", "find_candidates": "4-5 contours + filter",
+          "fit_quads": "6-7 corner split + line fits",
           "refine_quads": "8 edge refinement", "sample_cells": "9 cell sampling (both looks)",
           "read_bits": "9 bits", "decode": "10 dictionary"}
 

@@ -2,7 +2,12 @@ import cv2
 import numpy as np
 import pytest
 
-from visloc.markers.contours import CandidateFilter, filter_candidates, find_contours
+from visloc.markers.contours import (
+    CandidateFilter,
+    filter_candidates,
+    find_candidates,
+    find_contours,
+)
 
 
 def _native():
@@ -161,3 +166,38 @@ def test_compiled_filter_keeps_what_opencv_keeps():
                     assert np.array_equal(c1, c2) and np.array_equal(q1, q2)
                 kept += len(want)
     assert kept > 20
+
+
+@pytest.mark.parametrize("native", _engines())
+def test_find_candidates_is_stages_4_and_5_in_one(native):
+    from visloc.markers.binarize import threshold
+    from visloc.markers.contours import enclosing_borders, perimeter_bounds
+    from visloc.synth import random_scene
+
+    binary = threshold(random_scene(5, size=(320, 240), difficulty="easy").image, window=9, offset=7)
+    params = CandidateFilter()
+    both = find_candidates(binary, params, native=native)
+    apart = filter_candidates(enclosing_borders(binary, *perimeter_bounds(binary.shape, params), native=native),
+                              binary.shape, params, native=native)
+    assert len(both) == len(apart) > 0
+    for (c1, q1), (c2, q2) in zip(both, apart, strict=True):
+        assert np.array_equal(c1, c2) and np.array_equal(q1, q2)
+    assert find_candidates(np.zeros((50, 60), np.uint8), params, native=native) == []
+
+
+@pytest.mark.parametrize("native", _engines())
+def test_a_marker_seen_edge_on_is_a_candidate(native):
+    from visloc.markers.contours import enclosing_borders
+
+    b = _ink((120, 160))
+    quad = np.array([[20, 40], [140, 52], [142, 64], [22, 52]], np.int32)  # 120 x 12 px
+    cv2.fillConvexPoly(b, quad, 255)
+    cv2.fillConvexPoly(b, np.array([[40, 46], [120, 54], [121, 58], [41, 50]], np.int32), 0)  # its cells
+    contours = enclosing_borders(b, native=native)
+    assert len(contours) == 1
+    n = len(contours[0])
+    assert len(cv2.approxPolyDP(contours[0], 0.05 * n, True)) < 4  # the usual tolerance spans its width
+    found = filter_candidates(contours, b.shape, CandidateFilter(), native=native)
+    assert len(found) == 1
+    assert np.abs(np.sort(found[0][1], axis=0) - np.sort(quad, axis=0)).max() <= 2
+    assert filter_candidates(contours, b.shape, CandidateFilter(min_compactness=0.45), native=native) == []

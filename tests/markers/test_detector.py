@@ -8,7 +8,6 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from visloc.markers import MarkerDetector
-from visloc.markers.contours import CandidateFilter, perimeter_bounds
 from visloc.markers.explain import write_explain
 from visloc.synth import default_camera, random_scene, render_markers
 from visloc.synth.camera import CameraEffects, srgb_encode
@@ -159,39 +158,24 @@ def test_trace_and_explain_pictures(tmp_path, detector):
     assert [p["enclosing_a_hole"] for p in summary["passes"]] == [int(ps.enclosing.sum()) for ps in trace.passes]
 
 
-def test_the_coarse_pass_skips_markers_the_fine_pass_proposed(detector, monkeypatch):
+def test_the_coarse_pass_does_not_fit_markers_the_fine_pass_proposed(detector, monkeypatch):
     import visloc.markers.detector as det_mod
 
-    filtered = []
-    original = det_mod.filter_candidates
+    fitted = []
+    original = det_mod.fit_quads
 
-    def counting(contours, shape, params):
-        filtered.append(len(contours))
-        return original(contours, shape, params)
+    def counting(contours, hints, **kw):
+        fitted.append(len(contours))
+        return original(contours, hints, **kw)
 
-    monkeypatch.setattr(det_mod, "filter_candidates", counting)
+    monkeypatch.setattr(det_mod, "fit_quads", counting)
     trace = detector.trace(random_scene(3, size=(320, 240), difficulty="easy").image)
     enclosing = [int(ps.enclosing.sum()) for ps in trace.passes]
     assert len(trace.detections) > 0 and enclosing[1] > 0
-    # the fine pass filters every border that encloses a hole and has a candidate's length
-    lo, hi = perimeter_bounds(trace.passes[0].binary.shape, CandidateFilter())
-    in_bounds = [lo <= len(c) <= hi for c in trace.passes[0].contours]
-    assert filtered[0] == int((trace.passes[0].enclosing & np.array(in_bounds)).sum()) > 0
-    assert filtered[1] < enclosing[1]  # the coarse pass sees the markers again and skips them
+    # every marker is fitted once, by the fine pass; the coarse pass's copies stop before stage 6
+    assert sum(fitted) == len(trace.candidates) - sum(c.stage == "bits" for c in trace.candidates)
     assert {c.scale for c in trace.candidates if c.stage == "accepted"} == {1.0}
-
-
-def test_same_box_matches_boxes_by_centre_and_size():
-    from visloc.markers.detector import _same_box
-
-    seen = np.array([[[10.0, 10.0], [29.0, 29.0]]])  # a 20 px box centred at (19.5, 19.5)
-    boxes = np.array([
-        [[11.0, 9.0], [30.0, 28.0]],  # shifted by a pixel: the same
-        [[14.0, 14.0], [25.0, 25.0]],  # same centre, 12 px: a different (inner) square
-        [[20.0, 20.0], [39.0, 39.0]],  # shifted by half its size
-    ])
-    assert _same_box(boxes, seen).tolist() == [True, False, False]
-    assert _same_box(boxes, seen[:0]).tolist() == [False, False, False]
+    assert len([c for c in trace.candidates if c.stage == "accepted"]) == len(trace.detections)
 
 
 def test_bgr_input_gives_the_same_result(detector):

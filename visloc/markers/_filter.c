@@ -222,6 +222,9 @@ static int keep_one(const pt *c, int64_t n, const params *pr, int64_t w, int64_t
         if (area < pr->min_solidity * hull_a) return 0;
         m = approx_closed(c, n, 2 * pr->approx_rate * (double)n, approx, stack);
         if (m == 4 && on_sides(c, n, approx, 0.02 * (double)n + 1.0) < 0.8) return 0;
+    } else if (m < 4) { /* a thin quad (seen edge-on): the tolerance exceeded its width; a
+                         * quarter of the width estimated as 2 A / n instead */
+        m = approx_closed(c, n, 0.5 * area / (double)n, approx, stack);
     }
     if (m != 4 || !is_convex(approx, 4)) return 0;
     double min2 = INFINITY;

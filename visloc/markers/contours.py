@@ -39,8 +39,8 @@ except ImportError:  # the package was installed without a C compiler: OpenCV's 
 #: Whether :func:`enclosing_borders` and :func:`filter_candidates` run compiled code.
 NATIVE_BORDERS = _borders is not None and _filter is not None
 
-__all__ = ["NATIVE_BORDERS", "CandidateFilter", "enclosing_borders", "filter_candidates", "find_contours",
-           "outer_borders", "perimeter_bounds"]
+__all__ = ["NATIVE_BORDERS", "CandidateFilter", "enclosing_borders", "filter_candidates", "find_candidates",
+           "find_contours", "outer_borders", "perimeter_bounds"]
 
 
 def outer_borders(binary: NDArray[np.uint8]) -> tuple[list[NDArray[np.int32]], NDArray[np.bool_]]:
@@ -111,13 +111,18 @@ class CandidateFilter:
     approx_rate : float
         Polygon approximation tolerance as a fraction of the perimeter; the contour must
         simplify to exactly four vertices (at this tolerance, or at twice it when the first
-        try gives five to eight: a blob of noise touching a marker's border adds a spur).
+        try gives five to eight: a blob of noise touching a marker's border adds a spur, or at
+        a quarter of the estimated width ``2 area / perimeter`` when it gives fewer than four:
+        a marker seen nearly edge-on is thinner than the tolerance).
     min_side : float
         Shortest allowed side of that quadrilateral, px.
     min_solidity : float
         Contour area over its convex hull's area; squares seen in perspective are ~1.
     min_compactness : float
-        Lower bound of ``16 * area / perimeter^2`` (1 for a square, 0.89 for a 2:1 rectangle).
+        Lower bound of ``16 * area / perimeter^2`` (1 for a square, 0.89 for a 2:1
+        rectangle, 0.3 for about 11:1). 0.3 keeps markers seen nearly edge-on (a cube's side
+        face in a real photo: 0.31) that 0.45 dropped; texture let through is stopped by the
+        first look at the cells.
     border_distance : float
         Vertices closer than this to the image border reject the candidate (its true corner
         may lie outside the image).
@@ -128,7 +133,7 @@ class CandidateFilter:
     approx_rate: float = 0.05
     min_side: float = 6.0
     min_solidity: float = 0.85
-    min_compactness: float = 0.45
+    min_compactness: float = 0.3
     border_distance: float = 2.0
 
 
@@ -207,6 +212,8 @@ def filter_candidates(
             approx = cv2.approxPolyDP(c, 2 * params.approx_rate * n, True)
             if len(approx) == 4 and _on_sides(c.reshape(-1, 2), approx.reshape(4, 2), 0.02 * n + 1.0) < 0.8:
                 continue  # ... but most of the contour must still lie on the quad's sides
+        elif len(approx) < 4:  # a thin quad (seen edge-on): the tolerance exceeded its width;
+            approx = cv2.approxPolyDP(c, 0.5 * area / n, True)  # a quarter of the width 2 A / n
         if len(approx) != 4 or not cv2.isContourConvex(approx):
             continue
         (x0, y0), (x1, y1), (x2, y2), (x3, y3) = approx.reshape(4, 2).tolist()
@@ -227,3 +234,33 @@ def filter_candidates(
             continue
         out.append((c.reshape(-1, 2), approx.reshape(4, 2)))
     return out
+
+
+def find_candidates(binary: NDArray[np.uint8], params: CandidateFilter = CandidateFilter(), *,
+                    native: bool | None = None) -> list[tuple[NDArray[np.int32], NDArray[np.int32]]]:
+    """Stages 4 and 5 as the detector runs them: :func:`filter_candidates` on the
+    :func:`enclosing_borders` of ``binary`` within :func:`perimeter_bounds`.
+
+    The compiled route hands the packed borders of stage 4 straight to the compiled filter,
+    so only the surviving borders become arrays of their own; the same (contour, quad) pairs,
+    in the same order, as the two functions called one after the other.
+    """
+    lo, hi = perimeter_bounds(binary.shape, params)
+    if not (use_compiled(native, _borders, "visloc.markers._borders")
+            and use_compiled(native, _filter, "visloc.markers._filter")):
+        return filter_candidates(enclosing_borders(binary, lo, hi, native=False), binary.shape, params, native=False)
+    if binary.ndim != 2 or binary.dtype != np.uint8:
+        raise ValueError(f"binary must be a (H, W) uint8 image, got {binary.shape} {binary.dtype}")
+    b = np.ascontiguousarray(binary)
+    raw, raw_offsets = _borders.enclosing_borders(b, b.shape[0], b.shape[1], lo, hi)
+    pts = np.frombuffer(raw, np.int32).reshape(-1, 2)
+    offsets = np.frombuffer(raw_offsets, np.int64)
+    if len(offsets) < 2:
+        return []
+    h, w = binary.shape
+    raw_kept, raw_quads = _filter.filter_quads(
+        pts, offsets, w, h, (lo, hi, params.approx_rate, params.min_side, params.min_solidity,
+                             params.min_compactness, params.border_distance))
+    quads = np.frombuffer(raw_quads, np.int32).reshape(-1, 4, 2)
+    at = offsets.tolist()
+    return [(pts[at[i]:at[i + 1]], quads[j]) for j, i in enumerate(np.frombuffer(raw_kept, np.int64).tolist())]

@@ -38,13 +38,7 @@ from numpy.typing import NDArray
 
 from visloc.markers.binarize import blur, default_window, threshold, to_gray
 from visloc.markers.bits import CellSample, cell_white_fractions, decode, read_bits, sample_cells
-from visloc.markers.contours import (
-    CandidateFilter,
-    enclosing_borders,
-    filter_candidates,
-    outer_borders,
-    perimeter_bounds,
-)
+from visloc.markers.contours import CandidateFilter, find_candidates, outer_borders
 from visloc.markers.corners import _NEXT, RadialSplit
 from visloc.markers.corners_batch import fit_quads
 from visloc.markers.dictionary import Dictionary, load_dictionary
@@ -255,9 +249,9 @@ class DetectionTrace:
 
 @dataclass(frozen=True, eq=False)
 class _PassImage:
-    """Stages 2-4 of one search pass: the pass image's shape and scale to full resolution,
-    its threshold window and candidate bounds, the blurred and binary images, and the outer
-    borders that enclose a hole."""
+    """Stages 2-5 of one search pass: the pass image's shape and scale to full resolution,
+    its threshold window and candidate bounds, the blurred and binary images, and the
+    candidates (outer borders that enclose a hole and pass stage 5, each with its polygon)."""
 
     shape: tuple[int, ...]
     scale: NDArray[np.float64]
@@ -265,7 +259,7 @@ class _PassImage:
     candidates: CandidateFilter
     blurred: NDArray[np.uint8]
     binary: NDArray[np.uint8]
-    contours: list[NDArray[np.int32]]
+    found: list[tuple[NDArray[np.int32], NDArray[np.int32]]]
 
 
 _POOL: tuple[int, ThreadPoolExecutor] | None = None
@@ -326,6 +320,11 @@ class MarkerDetector:
             raise ValueError("passes, dark_passes: at least one search pass is needed")
         if isinstance(self.params.erode, bool) or not 0 <= self.params.erode <= 5:
             raise ValueError(f"erode must be 0 to 5 px, got {self.params.erode!r}")
+        # the lenient first look at a candidate's cells (before stage 6) allows this many white
+        # bits: the dictionary's range widened by the correctable errors, and one more
+        slack = int(self.dictionary.max_correction * self.params.error_correction_rate) + 1
+        lo_white, hi_white = self.dictionary.white_range
+        self._white_range = (lo_white - slack, hi_white + slack)
         lut = response_lut(self.params.response)  # a clear error now rather than at the first frame
         # the inverted image's grey level v holds the light 255 - lut[255 - v] of the original
         self._luts = {False: lut, True: 255.0 - lut[::-1]}
@@ -363,9 +362,11 @@ class MarkerDetector:
         return work, np.array([gray.shape[1] / work.shape[1], gray.shape[0] / work.shape[0]])
 
     def _search(self, gray: NDArray[np.uint8], sp: SearchPass, base: float) -> _PassImage:
-        """Stages 2-4 of one search pass. Touches nothing shared, so the passes after the
-        first run on a worker thread while the first goes on (the compiled stage 4 and
-        OpenCV's filters release the GIL)."""
+        """Stages 2-5 of one search pass. Touches nothing shared, so the passes after the
+        first run on a worker thread while the first goes on (the compiled stages 4 and 5 and
+        OpenCV's filters release the GIL; the Python of stages 6-7 stays on the main thread:
+        run on the worker, it waits for the GIL and slows the first pass down more than it
+        saves)."""
         p = self.params
         work, scale = self._work_image(gray, sp.scale * base)
         window = sp.window if sp.window is not None else default_window(work.shape)
@@ -376,9 +377,9 @@ class MarkerDetector:
                              border_distance=p.candidates.border_distance / scale.max())
         blurred = blur(work, p.blur_sigma)  # stage 2
         binary = threshold(blurred, window=window, offset=p.offset if sp.offset is None else sp.offset)  # stage 3
-        # stage 4: a marker's frame encloses its white cells, so ink without a hole is no marker
-        contours = enclosing_borders(binary, *perimeter_bounds(work.shape, candidates))
-        return _PassImage(work.shape, scale, window, candidates, blurred, binary, contours)
+        # stage 4: a marker's frame encloses its white cells, so ink without a hole is no marker;
+        # stage 5 on those borders
+        return _PassImage(work.shape, scale, window, candidates, blurred, binary, find_candidates(binary, candidates))
 
     def _area_check(self, gray: NDArray[np.uint8], corners: NDArray, thr: NDArray, ids: NDArray,
                     shift: NDArray) -> tuple[NDArray, NDArray[np.bool_]]:
@@ -410,13 +411,12 @@ class MarkerDetector:
         return confidence, clear
 
     def _eroded(self, found: _PassImage) -> _PassImage:
-        """Stage 3b: stage 4 again on a pass's binary image with its ink eroded (``erode``)."""
+        """Stage 3b: stages 4-5 again on a pass's binary image with its ink eroded (``erode``)."""
         binary = cv2.erode(found.binary, np.ones((self.params.erode,) * 2, np.uint8))
-        return replace(found, binary=binary,
-                       contours=enclosing_borders(binary, *perimeter_bounds(found.shape, found.candidates)))
+        return replace(found, binary=binary, found=find_candidates(binary, found.candidates))
 
     def _passes(self, gray: NDArray[np.uint8], passes: list[SearchPass], base: float) -> Iterator[_PassImage]:
-        """Stages 2-4 of the search passes in order, then (``erode``) stage 3b on the first
+        """Stages 2-5 of the search passes in order, then (``erode``) stage 3b on the first
         pass's binary image. All passes but the first are computed on a worker thread
         meanwhile, up to :data:`_THREAD_MAX_PIXELS` (beyond, OpenCV's own threads already
         keep both cores of the bench machine busy and the hand-over only adds to the slowest
@@ -439,21 +439,12 @@ class MarkerDetector:
                 job.cancel()
 
     @staticmethod
-    def _stage_5(found: _PassImage, seen: NDArray, log: dict | None) -> list[tuple[NDArray, NDArray]]:
-        """The candidate filter on one pass's borders; borders whose bounding box matches one
-        of the ``seen`` quads (full-resolution pixels, proposed by an earlier pass) skip it."""
-        contours, scale = found.contours, found.scale
+    def _log_pass(found: _PassImage, log: dict | None) -> None:
+        """Every border of a pass's binary image, for the pictures of ``--explain``."""
         if log is not None:
-            everything, holes = outer_borders(found.binary)  # every border, for the pictures
-            log["passes"].append(PassTrace(float(scale[0]), found.window, found.blurred, found.binary, everything,
-                                           holes))
-        if len(seen) and contours:
-            box = np.array([cv2.boundingRect(c) for c in contours], np.float64).reshape(-1, 2, 2)
-            lo = (box[:, 0] + 0.5) * scale - 0.5  # first and last pixel centres, full resolution
-            hi = (box[:, 0] + box[:, 1] - 0.5) * scale - 0.5
-            new = ~_same_box(np.stack([lo, hi], axis=1), np.stack([seen.min(axis=1), seen.max(axis=1)], axis=1))
-            contours = [contours[i] for i in np.flatnonzero(new)]
-        return filter_candidates(contours, found.shape, found.candidates)  # 5
+            everything, holes = outer_borders(found.binary)
+            log["passes"].append(PassTrace(float(found.scale[0]), found.window, found.blurred, found.binary,
+                                           everything, holes))
 
     def _run(self, image: NDArray[np.uint8], log: dict | None) -> list[MarkerDetection]:
         gray = to_gray(image)  # stage 1
@@ -476,54 +467,75 @@ class MarkerDetector:
             passes = [sp for k, sp in enumerate(p.passes) if k == 0 or short / sp.scale >= p.min_pass_size]
         return self._find(gray, self._passes(gray, passes, base), inverted, log)
 
-    def _find(self, gray: NDArray[np.uint8], searches: Iterator[_PassImage], inverted: bool,
-              log: dict | None) -> list[MarkerDetection]:
-        """Stages 5-10 on the candidates of the searches (stages 2-4), in order."""
+    def _propose(self, gray: NDArray[np.uint8], group: list[_PassImage], taken: NDArray, cands: _Cands,
+                 log: dict | None) -> NDArray:
+        """Stages 6-7 for the candidates of a group of search passes, appended to ``cands``;
+        returns ``taken`` (K, 4, 2), the polygons of the candidates fitted so far, with those
+        fitted now.
+
+        A cheap, lenient look at the cells through the polygon corners comes first: most
+        texture candidates (and the black cells inside markers) end there, before they cost a
+        corner fit and an edge refinement: no black border, no contrast, or too few or too
+        many white bits for any marker of the dictionary. Then pass by pass, a candidate that
+        an earlier pass already proposed and fitted (or an earlier one of its own pass
+        proposed) is passed over and the others that look right are fitted."""
         p = self.params
+        for search in group:
+            self._log_pass(search, log)
+        pass_of = np.concatenate([np.full(len(s.found), k, np.intp) for k, s in enumerate(group)] + [np.zeros(0, np.intp)])
+        if not len(pass_of):
+            return taken
+        contours = [c for s in group for c, _ in s.found]
+        scale = np.array([s.scale for s in group])[pass_of][:, None, :]  # (K, 1, 2)
+        approx = _clockwise(np.array([q for s in group for _, q in s.found], np.float64).reshape(-1, 4, 2))
+        approx = (approx + 0.5) * scale - 0.5  # polygon corners in full-resolution pixels
         bb = p.border_bits
-        n_cells = self.dictionary.marker_size + 2 * bb
-        slack = int(self.dictionary.max_correction * p.error_correction_rate) + 1  # +1: lenient
-        lo_white, hi_white = self.dictionary.white_range
-        lo_white, hi_white = lo_white - slack, hi_white + slack
-        cands = _Cands()
-        seen = np.zeros((0, 4, 2))
-        for search in searches:  # stages 2-4 (and 3b)
-            scale = search.scale
-            found = self._stage_5(search, seen, log)
-            if not found:
+        valid, bits = read_bits(sample_cells(gray, approx, self.dictionary.marker_size + 2 * bb), 0.5, border=bb)[:2]
+        white = bits.reshape(len(bits), -1).sum(axis=1)
+        looks = valid & (white >= self._white_range[0]) & (white <= self._white_range[1])
+        t = len(taken)
+        same = _same(np.concatenate([taken, approx]))[t:]  # (K, t + K): rows the group's candidates
+        done = np.ones(t, bool)  # the candidates fitted so far: the earlier ones, then this group's
+        done = np.concatenate([done, np.zeros(len(approx), bool)])
+        for k in range(len(group)):
+            mine = np.flatnonzero(pass_of == k)
+            if not len(mine):
                 continue
-            contours = [c for c, _ in found]
-            approx = _clockwise(np.array([q for _, q in found], np.float64).reshape(-1, 4, 2))
-            approx = (approx + 0.5) * scale - 0.5  # polygon corners in full-resolution pixels
-            # a candidate that an earlier pass already proposed and fitted costs nothing more
-            fresh = _distinct(np.concatenate([seen, approx]))
-            fresh = fresh[fresh >= len(seen)] - len(seen)
-            if not len(fresh):
-                continue
-            # a cheap, lenient look at the cells through the polygon corners: most texture
-            # candidates (and the black cells inside markers) end here, before they cost a
-            # corner fit and an edge refinement: no black border, no contrast, or too few or
-            # too many white bits for any marker of the dictionary
-            valid, bits = read_bits(sample_cells(gray, approx[fresh], n_cells), 0.5, border=bb)[:2]
-            white = bits.reshape(len(bits), -1).sum(axis=1)
-            looks = valid & (white >= lo_white) & (white <= hi_white)
+            sub = same[mine]
+            fresh = mine[~(sub[:, done].any(axis=1) | np.tril(sub[:, t + mine], -1).any(axis=1))]
             if log is not None:
-                for i in fresh[~looks]:
-                    _note(log, contours[i], float(scale[0]), None, None, None, None, None, "bits")
-            keep = fresh[looks]
-            hints = (approx[keep] + 0.5) / scale - 0.5
+                for i in fresh[~looks[fresh]].tolist():
+                    _note(log, contours[i], float(scale[i, 0, 0]), None, None, None, None, None, "bits")
+            keep = fresh[looks[fresh]]
+            hints = (approx[keep] + 0.5) / scale[keep] - 0.5
             quads, fitted, splits = fit_quads([contours[i] for i in keep], hints, sigma=p.corner_sigma,
                                               padding=p.corner_padding, splits=log is not None)  # 6-7
-            full = (quads + 0.5) * scale - 0.5  # to full-resolution pixel centres
+            full = (quads + 0.5) * scale[keep] - 0.5  # to full-resolution pixel centres
             for j, (i, ok) in enumerate(zip(keep.tolist(), fitted.tolist(), strict=True)):
                 if not ok:
-                    _note(log, contours[i], float(scale[0]), None, None, None, None, None, "corners")
+                    _note(log, contours[i], float(scale[i, 0, 0]), None, None, None, None, None, "corners")
                     continue
                 cands.quads.append(full[j])
                 cands.contours.append(contours[i])
-                cands.scales.append(float(scale[0]))
+                cands.scales.append(float(scale[i, 0, 0]))
                 cands.splits.append(splits[j] if splits is not None else None)
-            seen = np.concatenate([seen, approx[keep[fitted]]])
+            done[t + keep[fitted]] = True
+        return np.concatenate([taken, approx[done[t:]]])
+
+    def _find(self, gray: NDArray[np.uint8], searches: Iterator[_PassImage], inverted: bool,
+              log: dict | None) -> list[MarkerDetection]:
+        """Stages 6-10 on the candidates of the searches (stages 2-5), in order (6-7:
+        :meth:`_propose`)."""
+        p = self.params
+        bb = p.border_bits
+        n_cells = self.dictionary.marker_size + 2 * bb
+        cands = _Cands()
+        taken = np.zeros((0, 4, 2))  # the polygons of the candidates fitted so far
+        searches = iter(searches)
+        # the first pass's candidates, then those of all later passes at once (their stages
+        # 2-5 ran on the worker meanwhile)
+        taken = self._propose(gray, [s for s in [next(searches, None)] if s is not None], taken, cands, log)
+        taken = self._propose(gray, list(searches), taken, cands, log)
         if not cands.quads:
             return []
         quads = np.array(cands.quads)
@@ -632,32 +644,14 @@ def _areas(q: NDArray) -> NDArray:
     return 0.5 * ((x * y[..., _NEXT]).sum(-1) - (x[..., _NEXT] * y).sum(-1))
 
 
-def _same_box(boxes: NDArray, seen: NDArray) -> NDArray[np.bool_]:
-    """Which of the boxes (K, 2, 2: first and last pixel centre) match one of the ``seen``
-    boxes (S, 2, 2) by :func:`_distinct`'s rule: centre within 15 % of the seen box's size
-    (geometric mean of its width and height), size within 0.8-1.25 times."""
-    if not len(seen) or not len(boxes):
-        return np.zeros(len(boxes), bool)
-    size = np.sqrt(np.prod(boxes[:, 1] - boxes[:, 0] + 1, axis=1))
-    seen_size = np.sqrt(np.prod(seen[:, 1] - seen[:, 0] + 1, axis=1))
-    d2 = ((boxes.mean(axis=1)[:, None] - seen.mean(axis=1)[None]) ** 2).sum(axis=2)
-    ratio = size[:, None] / np.maximum(seen_size[None, :], 1e-9)
-    return ((d2 < (0.15 * seen_size[None, :]) ** 2) & (ratio > 0.8) & (ratio < 1.25)).any(axis=1)
-
-
-def _distinct(quads: NDArray) -> NDArray[np.intp]:
-    """Indices of the quads (K, 4, 2) to keep when several passes found the same one: a quad
-    whose centre lies within 15 % of its side of an earlier quad's centre, with a side within
-    25 % of that quad's, is dropped."""
-    k = len(quads)
-    if k < 2:
-        return np.arange(k)
+def _same(quads: NDArray) -> NDArray[np.bool_]:
+    """(K, K): whether quad i is the same marker as quad j (K, 4, 2): its centre lies within
+    15 % of its side of quad j's centre, and its side is within 25 % of quad j's."""
     side = np.sqrt(np.abs(_areas(quads)))
     c = quads.mean(axis=1)
     d2 = ((c[:, None, :] - c[None, :, :]) ** 2).sum(axis=2)
     ratio = side[:, None] / np.maximum(side[None, :], 1e-9)
-    same = (d2 < (0.15 * side[:, None]) ** 2) & (ratio > 0.8) & (ratio < 1.25)
-    return np.flatnonzero(~np.tril(same, -1).any(axis=1))
+    return (d2 < (0.15 * side[:, None]) ** 2) & (ratio > 0.8) & (ratio < 1.25)
 
 
 def _merge_duplicates(found: list[tuple[MarkerDetection, float]]) -> list[MarkerDetection]:

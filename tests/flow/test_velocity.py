@@ -97,3 +97,9 @@ def test_ego_motion_integrates_a_track():
     assert len(ego.track) == 6 and ego.track[-1][0] == pytest.approx(5 / 60)
     with pytest.raises(ValueError, match="size"):
         ego.update(np.zeros((100, 100), np.uint8))
+
+
+@pytest.mark.parametrize("kw", [{"fps": 0}, {"fps": -30.0}, {"height": float("nan")}, {"height": 0.0}, {"fps": True}])
+def test_egomotion_refuses_a_rate_or_height_it_cannot_use(kw):
+    with pytest.raises(ValueError, match="must be a finite number > 0"):
+        EgoMotion(CAM, **kw)

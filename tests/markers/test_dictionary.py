@@ -46,6 +46,26 @@ def test_malformed_yaml_is_rejected(tmp_path):
         load_dictionary(str(p))
 
 
+@pytest.mark.parametrize("text", ["", "garbage {{{ not yaml\x00\x01", "%YAML:1.0\n[1, 2"])
+def test_empty_or_garbage_yaml_is_a_clear_error(tmp_path, text):
+    p = tmp_path / "dict.yml"
+    p.write_bytes(text.encode("latin-1"))
+    with pytest.raises(ValueError, match="could not be read as OpenCV YAML|could not be opened|lacks"):
+        load_dictionary(str(p))
+
+
+def test_correction_bits_beyond_the_dictionarys_distance_are_refused(tmp_path):
+    d = load_dictionary("DICT_4X4_50")
+    rows = "".join(f'marker_{i}: "{"".join(map(str, d.bits[i].ravel()))}"\n' for i in range(len(d)))
+    head = f"%YAML:1.0\nnmarkers: {len(d)}\nmarkersize: 4\n"
+    ok, bad = tmp_path / "ok.yml", tmp_path / "bad.yml"
+    ok.write_text(head + rows + f"maxCorrectionBits: {d.max_correction}\n")
+    bad.write_text(head + rows + "maxCorrectionBits: 99\n")
+    assert load_dictionary(str(ok)).max_correction == d.max_correction
+    with pytest.raises(ValueError, match="maxCorrectionBits 99 exceeds"):
+        load_dictionary(str(bad))
+
+
 @settings(max_examples=40, deadline=None)
 @given(marker_id=st.integers(0, 249), rot=st.integers(0, 3), flips=st.integers(0, 2))
 def test_match_finds_any_rotation_with_errors(marker_id, rot, flips):

@@ -132,3 +132,11 @@ def test_position_covariance_matches_monte_carlo():
     emp = np.std(positions, axis=0)
     pred = np.sqrt(np.diag(np.mean(covs, axis=0)))
     assert np.all(emp / pred > 0.7) and np.all(emp / pred < 1.4), (emp, pred)
+
+
+@pytest.mark.parametrize("kw", [{"max_residual": float("nan")}, {"max_residual": 0.0}, {"pixel_sigma": -1.0},
+                                {"max_iter": 2.5}, {"n_starts": 0}, {"max_iter": True}])
+def test_options_it_cannot_use_are_refused_not_half_used(kw):
+    g = GridMap(2, 2, 0.1, 0.05)
+    with pytest.raises(ValueError, match="must be a"):
+        estimate_camera_pose([MarkerDetection(0, np.array([[0, 0], [10, 0], [10, 10], [0, 10.0]]))], g, CAM, **kw)

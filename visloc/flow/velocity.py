@@ -174,6 +174,13 @@ class EgoMotion:
     _pos: NDArray = field(default_factory=lambda: np.zeros(2), init=False, repr=False)
     _yaw: float = field(default=0.0, init=False, repr=False)
 
+    def __post_init__(self) -> None:
+        for name in ("height", "fps"):
+            v = getattr(self, name)
+            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float, np.number))
+                                  or not np.isfinite(v) or v <= 0):
+                raise ValueError(f"EgoMotion: {name} must be a finite number > 0 or None, got {v!r}")
+
     def update(
         self,
         image: NDArray[np.uint8],

@@ -97,7 +97,10 @@ def pack_bits(bits: NDArray) -> np.uint64:
     return np.uint64(np.sum(flat * weights, dtype=np.uint64))
 
 
-def _build(name: str, bits: NDArray[np.uint8], max_correction: int | None) -> Dictionary:
+def _build(name: str, bits: NDArray[np.uint8], max_correction: int | None, *, check: bool = False) -> Dictionary:
+    """A :class:`Dictionary` from bit patterns (n, s, s). ``max_correction`` ``None``: the
+    design capacity ``(d_min - 1) // 2``; ``check``: a given value must not exceed it (a file's
+    ``maxCorrectionBits``: more would match texture and other markers' codes to an id)."""
     n, s, _ = bits.shape
     if s * s > 64:
         raise ValueError(f"markers of {s}x{s} bits are not supported (at most 8x8)")
@@ -106,14 +109,19 @@ def _build(name: str, bits: NDArray[np.uint8], max_correction: int | None) -> Di
     for r in range(4):
         rot = np.rot90(bits, r, axes=(1, 2)).reshape(n, -1).astype(np.uint64)
         codes[:, r] = np.sum(rot * weights, axis=1, dtype=np.uint64)
+    capacity = (_min_distance(codes) - 1) // 2
     if max_correction is None:
-        max_correction = (_min_distance(codes) - 1) // 2 if n > 1 else (s * s - 1) // 2
+        max_correction = capacity
+    elif check and max_correction > capacity:
+        raise ValueError(f"dictionary {name!r}: maxCorrectionBits {max_correction} exceeds what its markers allow "
+                         f"({max(capacity, 0)}: their smallest distance in any rotation, less one, halved)")
     return Dictionary(name, bits, int(max(max_correction, 0)), codes)
 
 
 def _min_distance(codes: NDArray[np.uint64]) -> int:
     """Smallest Hamming distance between rotation 0 of a marker and any rotation of any
-    other marker, or a non-trivial rotation of itself."""
+    other marker, or a non-trivial rotation of itself (for one marker: its rotations only, so
+    a rotation-symmetric pattern has distance 0)."""
     base = codes[:, :1]
     d_other = np.bitwise_count(base[:, None, :] ^ codes[None, :, :])  # (n, n, 4)
     n = codes.shape[0]
@@ -133,7 +141,10 @@ def _predefined(name: str) -> Dictionary:
 
 
 def _from_yaml(path: str) -> Dictionary:
-    fs = cv2.FileStorage(path, cv2.FILE_STORAGE_READ)
+    try:
+        fs = cv2.FileStorage(path, cv2.FILE_STORAGE_READ)
+    except (cv2.error, SystemError) as e:  # OpenCV's parser raises on garbage and empty files
+        raise ValueError(f"dictionary file {path!r} could not be read as OpenCV YAML (empty or malformed)") from e
     try:
         if not fs.isOpened():
             raise ValueError(f"dictionary file {path!r} could not be opened as OpenCV YAML")
@@ -154,7 +165,7 @@ def _from_yaml(path: str) -> Dictionary:
         max_corr = None if mc.empty() or int(mc.real()) <= 0 else int(mc.real())
     finally:
         fs.release()
-    return _build(path, bits, max_corr)
+    return _build(path, bits, max_corr, check=True)
 
 
 def load_dictionary(spec: str | Dictionary) -> Dictionary:

@@ -138,6 +138,14 @@ def estimate_camera_pose(
         raise TypeError(f"marker_map must be a MarkerMap, got {type(marker_map).__name__}")
     if not isinstance(camera, Camera):
         raise TypeError(f"camera must be a Camera, got {type(camera).__name__}")
+    for name, v, integer in (("pixel_sigma", pixel_sigma, False), ("max_residual", max_residual, False),
+                             ("max_iter", max_iter, True), ("n_starts", n_starts, True)):
+        if v is None and name == "pixel_sigma":
+            continue
+        if (isinstance(v, bool) or not isinstance(v, (int, float, np.number)) or not np.isfinite(v) or v <= 0
+                or (integer and int(v) != v)):
+            kind = "a whole number" if integer else "a finite number"
+            raise ValueError(f"estimate_camera_pose: {name} must be {kind} > 0, got {v!r}")
     known = [d for d in detections if d.id in marker_map]
     unknown = sorted({int(d.id) for d in detections if d.id not in marker_map})
     if not known:

@@ -247,8 +247,9 @@ def run_boards(rounds: int, n: int, seed0: int = 9) -> dict:
 #: the detector's stage functions whose time :func:`stage_times` measures, in pipeline order
 STAGES = {"blur": "2 blur", "threshold": "3 threshold", "find_candidates": "4-5 contours + filter",
           "fit_quads": "6-7 corner split + line fits",
-          "refine_quads": "8 edge refinement", "sample_cells": "9 cell sampling (both looks)",
-          "read_bits": "9 bits", "decode": "10 dictionary"}
+          "refine_quads": "8 edge refinement", "read_cells": "9 cells read (first look and stage 9)",
+          "sample_cells": "9 second reads: samples", "read_bits": "9 second reads: bits",
+          "cell_white_fractions": "9 area read (confidence)", "decode": "10 dictionary"}
 
 
 def stage_times(size, sets, seed0, rounds=2):

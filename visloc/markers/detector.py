@@ -28,6 +28,7 @@ the whole path twice, once per polarity.
 from __future__ import annotations
 
 import os
+import statistics
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, fields, replace
@@ -37,7 +38,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from visloc.markers.binarize import blur, default_window, threshold, to_gray
-from visloc.markers.bits import CellSample, cell_white_fractions, decode, read_bits, sample_cells
+from visloc.markers.bits import (
+    CellSample,
+    cell_white_fractions,
+    decode,
+    read_bits,
+    read_cells,
+    sample_cells,
+)
 from visloc.markers.contours import CandidateFilter, find_candidates, outer_borders
 from visloc.markers.corners import _NEXT, RadialSplit
 from visloc.markers.corners_batch import fit_quads
@@ -251,7 +259,9 @@ class DetectionTrace:
 class _PassImage:
     """Stages 2-5 of one search pass: the pass image's shape and scale to full resolution,
     its threshold window and candidate bounds, the blurred and binary images, and the
-    candidates (outer borders that enclose a hole and pass stage 5, each with its polygon)."""
+    candidates (outer borders that enclose a hole and pass stage 5, each with its polygon);
+    then the polygons' corners in full-resolution pixels (K, 4, 2) and whether the cells
+    through them look like a marker's (:meth:`MarkerDetector._look`)."""
 
     shape: tuple[int, ...]
     scale: NDArray[np.float64]
@@ -260,6 +270,8 @@ class _PassImage:
     blurred: NDArray[np.uint8]
     binary: NDArray[np.uint8]
     found: list[tuple[NDArray[np.int32], NDArray[np.int32]]]
+    approx: NDArray[np.float64] | None = None
+    looks: NDArray[np.bool_] | None = None
 
 
 _POOL: tuple[int, ThreadPoolExecutor] | None = None
@@ -379,7 +391,26 @@ class MarkerDetector:
         binary = threshold(blurred, window=window, offset=p.offset if sp.offset is None else sp.offset)  # stage 3
         # stage 4: a marker's frame encloses its white cells, so ink without a hole is no marker;
         # stage 5 on those borders
-        return _PassImage(work.shape, scale, window, candidates, blurred, binary, find_candidates(binary, candidates))
+        return self._look(gray, _PassImage(work.shape, scale, window, candidates, blurred, binary,
+                                           find_candidates(binary, candidates)))
+
+    def _look(self, gray: NDArray[np.uint8], search: _PassImage) -> _PassImage:
+        """A cheap, lenient look at the cells of a pass's candidates through their polygon
+        corners: most texture candidates (and the black cells inside markers) end there,
+        before they cost a corner fit and an edge refinement: no black border, no contrast, or
+        too few or too many white bits for any marker of the dictionary. Compiled, it
+        releases the GIL, so the later passes look on the worker thread."""
+        k = len(search.found)
+        if not k:
+            return replace(search, approx=np.zeros((0, 4, 2)), looks=np.zeros(0, bool))
+        approx = _clockwise(np.array([q for _, q in search.found], np.float64).reshape(k, 4, 2))
+        approx = (approx + 0.5) * search.scale - 0.5  # polygon corners in full-resolution pixels
+        bb = self.params.border_bits
+        valid, bits = read_cells(gray, approx, self.dictionary.marker_size + 2 * bb, border_error_rate=0.5,
+                                 border=bb)[1][:2]
+        white = bits.reshape(k, -1).sum(axis=1)
+        looks = valid & (white >= self._white_range[0]) & (white <= self._white_range[1])
+        return replace(search, approx=approx, looks=looks)
 
     def _area_check(self, gray: NDArray[np.uint8], corners: NDArray, thr: NDArray, ids: NDArray,
                     shift: NDArray) -> tuple[NDArray, NDArray[np.bool_]]:
@@ -394,7 +425,7 @@ class MarkerDetector:
         p = self.params
         bb = p.border_bits
         n = self.dictionary.marker_size + 2 * bb
-        cell_px = float(np.median(np.sqrt(np.abs(_areas(corners))))) / n
+        cell_px = statistics.median(np.sqrt(np.abs(_areas(corners))).tolist()) / n  # np.median's value, cheaper
         per_side = int(np.clip(np.ceil(cell_px / 2), 4, 32))  # a sample per 2 px of cell, 4-32
         white = cell_white_fractions(gray, corners, n, thr, per_side=per_side, margin=p.cell_margin)
         expected = self._cells_seen[ids, (4 - shift) % 4]  # decode: observed = rot90(true, (4 - shift) % 4)
@@ -410,10 +441,10 @@ class MarkerDetector:
                  & (bad[:, ~frame].sum(axis=1) <= int(self.dictionary.max_correction * p.error_correction_rate)))
         return confidence, clear
 
-    def _eroded(self, found: _PassImage) -> _PassImage:
+    def _eroded(self, gray: NDArray[np.uint8], found: _PassImage) -> _PassImage:
         """Stage 3b: stages 4-5 again on a pass's binary image with its ink eroded (``erode``)."""
         binary = cv2.erode(found.binary, np.ones((self.params.erode,) * 2, np.uint8))
-        return replace(found, binary=binary, found=find_candidates(binary, found.candidates))
+        return self._look(gray, replace(found, binary=binary, found=find_candidates(binary, found.candidates)))
 
     def _passes(self, gray: NDArray[np.uint8], passes: list[SearchPass], base: float) -> Iterator[_PassImage]:
         """Stages 2-5 of the search passes in order, then (``erode``) stage 3b on the first
@@ -433,7 +464,7 @@ class MarkerDetector:
                 for sp in rest:
                     yield self._search(gray, sp, base)
             if self.params.erode:
-                yield self._eroded(first)
+                yield self._eroded(gray, first)
         finally:
             for job in later:
                 job.cancel()
@@ -473,12 +504,9 @@ class MarkerDetector:
         returns ``taken`` (K, 4, 2), the polygons of the candidates fitted so far, with those
         fitted now.
 
-        A cheap, lenient look at the cells through the polygon corners comes first: most
-        texture candidates (and the black cells inside markers) end there, before they cost a
-        corner fit and an edge refinement: no black border, no contrast, or too few or too
-        many white bits for any marker of the dictionary. Then pass by pass, a candidate that
-        an earlier pass already proposed and fitted (or an earlier one of its own pass
-        proposed) is passed over and the others that look right are fitted."""
+        Pass by pass, a candidate that an earlier pass already proposed and fitted (or an
+        earlier one of its own pass proposed) is passed over and the others whose cells
+        looked right (:meth:`_look`) are fitted."""
         p = self.params
         for search in group:
             self._log_pass(search, log)
@@ -487,12 +515,8 @@ class MarkerDetector:
             return taken
         contours = [c for s in group for c, _ in s.found]
         scale = np.array([s.scale for s in group])[pass_of][:, None, :]  # (K, 1, 2)
-        approx = _clockwise(np.array([q for s in group for _, q in s.found], np.float64).reshape(-1, 4, 2))
-        approx = (approx + 0.5) * scale - 0.5  # polygon corners in full-resolution pixels
-        bb = p.border_bits
-        valid, bits = read_bits(sample_cells(gray, approx, self.dictionary.marker_size + 2 * bb), 0.5, border=bb)[:2]
-        white = bits.reshape(len(bits), -1).sum(axis=1)
-        looks = valid & (white >= self._white_range[0]) & (white <= self._white_range[1])
+        approx = np.concatenate([s.approx for s in group])
+        looks = np.concatenate([s.looks for s in group])
         t = len(taken)
         same = _same(np.concatenate([taken, approx]))[t:]  # (K, t + K): rows the group's candidates
         done = np.ones(t, bool)  # the candidates fitted so far: the earlier ones, then this group's
@@ -546,9 +570,10 @@ class MarkerDetector:
             corners, refined = refine_quads(gray, quads, radius=radii, iterations=p.refine_iterations,
                                             count=p.refine_profiles, response=self._luts[inverted],
                                             bend=p.bend)  # stages 8 and 8b
-        cells = sample_cells(gray, corners, n_cells, per_side=4)  # stage 9, batched
-        valid, bits, margin, contrast, thr = read_bits(cells, p.border_error_rate, border=bb,
-                                                            min_quiet_zone=p.min_quiet_zone)
+        cells, (valid, bits, margin, contrast, thr) = read_cells(  # stage 9, batched
+            gray, corners, n_cells, per_side=4, border_error_rate=p.border_error_rate, border=bb,
+            min_quiet_zone=p.min_quiet_zone)
+        valid, bits, margin, contrast, thr = (np.array(a) for a in (valid, bits, margin, contrast, thr))
         ids, shift, hamming, matched = decode(bits, self.dictionary, p.error_correction_rate)  # 10
         # second reads of the candidates the first did not decode: with a threshold that
         # follows the light across the marker (glare, shadow edges), then through the stage-7

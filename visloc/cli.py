@@ -1,20 +1,24 @@
 """``visloc`` command line: argparse sub-commands, one-line errors, exit codes.
 
 Exit codes: 0 success; 1 some frames failed (unreadable images, ...); 2 usage or
-configuration errors (missing path, unknown dictionary, malformed camera file, ...);
-130 interrupted (everything already computed is kept).
+configuration errors (missing path, unknown dictionary, malformed camera file, an output that
+would overwrite an input, ...); 3 an internal error (a bug: one line, ``--debug`` anywhere on
+the line shows the traceback); 130 interrupted (everything already computed is kept).
 """
 
 from __future__ import annotations
 
 import argparse
+import glob
+import os
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 from typing import NoReturn
 
 from visloc import __version__
 
-__all__ = ["UsageError", "build_parser", "main"]
+__all__ = ["UsageError", "build_parser", "check_outputs", "main"]
 
 
 class UsageError(ValueError):
@@ -29,6 +33,22 @@ def _positive(text: str) -> float:
     if not (0 < v < float("inf")):  # also rejects NaN
         raise argparse.ArgumentTypeError(f"must be a positive finite number, got {text!r}")
     return v
+
+
+def _at_most(limit: float, why: str):
+    """An argparse type: a positive finite number no larger than ``limit`` (``why`` says why)."""
+
+    def parse(text: str) -> float:
+        v = _positive(text)
+        if v > limit:
+            raise argparse.ArgumentTypeError(f"must be at most {limit:g} ({why}), got {text!r}")
+        return v
+
+    return parse
+
+
+#: most frames ``render localize`` and ``render flow`` hold in memory (seconds x fps)
+MAX_RENDER_FRAMES = 5000
 
 
 def _response(text: str) -> str | float:
@@ -127,7 +147,8 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("map", help="marker map (OpenCV YAML)")
     rp.add_argument("output", help="output image (.png)")
     rp.add_argument("--dict", default="DICT_4X4_50", metavar="NAME|FILE", help="marker dictionary")
-    rp.add_argument("--dpi", type=_positive, default=300.0, help="dots per inch (default 300)")
+    rp.add_argument("--dpi", type=_at_most(2400, "a printer's resolution"), default=300.0,
+                    help="dots per inch (default 300, at most 2400)")
     rl = rs.add_parser("localize", help="a downward camera flying over a marker grid + ground truth")
     rl.add_argument("outdir", help="output folder")
     rl.add_argument("--seconds", type=_positive, default=5.0, help="duration (default 5 s)")
@@ -210,7 +231,8 @@ def build_parser() -> argparse.ArgumentParser:
     sm.add_argument("scenario", choices=("hover", "sidestep", "push", "hover-vision"),
                     help="hover 10 s; sidestep: 1 m in y (report Fig. 4.6); push: 4 N for 0.1 s "
                          "(Fig. 4.5); hover-vision: 30 s on the marker-grid vision pipeline")
-    sm.add_argument("--seconds", type=_positive, help="simulated duration (default: the scenario's)")
+    sm.add_argument("--seconds", type=_at_most(3600, "an hour of flight; every control step is kept"),
+                    help="simulated duration (default: the scenario's; at most 3600)")
     sm.add_argument("--sigma", type=float, default=0.0, metavar="N",
                     help="draw each motor's c, d at +-N standard deviations (signs from --seed; default 0)")
     sm.add_argument("--seed", type=int, default=0, help="seed of motor signs, sensor noise, turbulence (default 0)")
@@ -234,30 +256,88 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: options naming files or folders a command reads, and those it writes
+_INPUTS = ("source", "camera", "map", "height_csv", "imu", "dict", "body", "reference")
+_OUTPUTS = ("out", "annotate", "rerun", "explain", "plot", "outdir", "output")
+
+
+def _inputs(args: argparse.Namespace) -> tuple[list[Path], list[Path]]:
+    """The input files and folders of a parsed command line (globs expanded), resolved."""
+    files, folders = [], []
+    for name in _INPUTS:
+        v = getattr(args, name, None)
+        if not isinstance(v, str) or not v:
+            continue
+        p = Path(v)
+        if p.is_dir():
+            folders.append(p.resolve())
+        elif p.is_file():
+            files.append(p.resolve())
+        elif name == "source" and glob.has_magic(v):
+            files += [Path(f).resolve() for f in glob.glob(v)]
+    return files, folders
+
+
+def check_outputs(args: argparse.Namespace) -> None:
+    """Refuse (:class:`UsageError`) an output path that is one of the command's input files,
+    is or lies inside an input folder, or is a folder holding an input file: the run would
+    overwrite what it reads."""
+    files, folders = _inputs(args)
+    for name in _OUTPUTS:
+        v = getattr(args, name, None)
+        if not isinstance(v, str) or not v:
+            continue
+        out = Path(v).resolve()
+        what = f"--{name.replace('_', '-')} {v}" if name != "outdir" else f"output folder {v}"
+        same = out in files or (out.is_file() and any(os.path.samefile(out, f) for f in files))
+        if same:
+            raise UsageError(f"{what} is an input of this run: it would be overwritten")
+        for f in folders:
+            if out == f or f in out.parents:
+                raise UsageError(f"{what} lies in the input folder {f}: write outputs elsewhere")
+        for f in files:
+            if out in f.parents:
+                raise UsageError(f"{what} holds the input {f}: write outputs elsewhere")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``visloc`` command line; returns the exit status."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in argv  # accepted anywhere on the line
+    args = parser.parse_args([a for a in argv if a != "--debug"])
+    args.debug = debug
     if args.command is None:
         parser.print_help(sys.stderr)
         return 2
     if args.command == "render" and args.what is None:
         parser.parse_args(["render", "--help"])
+    if args.command == "render" and args.what in ("localize", "flow") and args.seconds * args.fps > MAX_RENDER_FRAMES:
+        parser.error(f"render {args.what}: --seconds x --fps is {args.seconds * args.fps:g} frames, at most "
+                     f"{MAX_RENDER_FRAMES} (they are rendered in memory)")
     from visloc import commands  # imported late: `visloc --help` stays fast
 
     run = {"detect": commands.detect, "render": commands.render, "demo": commands.demo,
            "flow": commands.flow, "track": commands.track, "localize": commands.localize,
            "model": commands.model, "robust": commands.robust, "sim": commands.sim}[args.command]
     try:
+        check_outputs(args)
         return run(args)
     except KeyboardInterrupt:
         print("visloc: interrupted; results written so far are kept", file=sys.stderr)
         return 130
-    except (UsageError, ValueError, TypeError, OSError) as exc:
+    except (UsageError, ValueError, OSError) as exc:  # the input's or the configuration's fault
         if args.debug:
             raise
         print(f"visloc {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except Exception as exc:  # a bug, not the user's input (TypeError included: the commands build
+        # every object the library is given)
+        if args.debug:
+            raise
+        print(f"visloc {args.command}: internal error: {type(exc).__name__}: {exc} (rerun with --debug for the "
+              "traceback)", file=sys.stderr)
+        return 3
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -199,3 +199,49 @@ def test_border_bits_inverted_and_confidence_from_the_command_line(tmp_path):
     assert main(["detect", str(tmp_path / "sheet.png"), "--inverted", "both", "--out", str(out), "--quiet"]) == 0
     (rec,) = _lines(out)
     assert [(m["id"], m.get("inverted", False)) for m in rec["markers"]] == [(31, True)]
+
+
+def _copy_frames(rendered, folder, n=2):
+    folder.mkdir()
+    for p in sorted(rendered.glob("frame_*.png"))[:n]:
+        (folder / p.name).write_bytes(p.read_bytes())
+    return sorted(folder.glob("*.png"))
+
+
+@pytest.mark.parametrize("case", ["out is the image", "annotate is the folder", "out in the folder",
+                                  "annotate holds the image", "out is the camera", "rerun via a glob"])
+def test_an_output_that_would_overwrite_an_input_is_refused(rendered, tmp_path, capsys, case):
+    frames = _copy_frames(rendered, tmp_path / "in")
+    before = {p: p.read_bytes() for p in frames}
+    cam = tmp_path / "camera.yml"
+    cam.write_bytes((rendered / "camera.yml").read_bytes())
+    argv = {
+        "out is the image": ["detect", str(frames[0]), "--out", str(frames[0])],
+        "annotate is the folder": ["detect", str(tmp_path / "in"), "--annotate", str(tmp_path / "in")],
+        "out in the folder": ["detect", str(tmp_path / "in"), "--out", str(tmp_path / "in" / "det.jsonl")],
+        "annotate holds the image": ["detect", str(frames[0]), "--annotate", str(tmp_path / "in")],
+        "out is the camera": ["detect", str(frames[0]), "--camera", str(cam), "--marker-length", "0.1",
+                              "--out", str(cam)],
+        "rerun via a glob": ["detect", str(tmp_path / "in" / "*.png"), "--rerun", str(frames[1])],
+    }[case]
+    code = main(argv)
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1
+    assert "overwritten" in err or "write outputs elsewhere" in err
+    assert {p: p.read_bytes() for p in frames} == before  # nothing touched
+    assert cam.read_bytes() == (rendered / "camera.yml").read_bytes()
+
+
+def test_an_internal_error_is_one_line_exit_3_and_debug_anywhere_shows_it(rendered, capsys, monkeypatch):
+    from visloc import commands
+
+    def broken(args):
+        raise ZeroDivisionError("a bug")
+
+    monkeypatch.setattr(commands, "detect", broken)
+    img = str(min(rendered.glob("frame_*.png")))
+    assert main(["detect", img]) == 3
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "internal error" in err and "--debug" in err
+    with pytest.raises(ZeroDivisionError):
+        main(["detect", img, "--debug"])  # after the sub-command too

@@ -8,15 +8,16 @@ from visloc.cli import main
 
 
 def test_localize_a_rendered_flight(tmp_path, capsys):
-    assert main(["render", "localize", str(tmp_path), "--seconds", "0.5", "--fps", "30", "--seed", "2"]) == 0
+    src = tmp_path / "flight"  # outputs may not go into the input folder
+    assert main(["render", "localize", str(src), "--seconds", "0.5", "--fps", "30", "--seed", "2"]) == 0
     out = tmp_path / "est.csv"
-    code = main(["localize", str(tmp_path), "--camera", str(tmp_path / "camera.yml"), "--map", str(tmp_path / "map.yml"),
-                 "--dict", "DICT_4X4_100", "--fps", "30", "--truth", str(tmp_path / "ground_truth.csv"),
+    code = main(["localize", str(src), "--camera", str(src / "camera.yml"), "--map", str(src / "map.yml"),
+                 "--dict", "DICT_4X4_100", "--fps", "30", "--truth", str(src / "ground_truth.csv"),
                  "--out", str(out), "--rerun", str(tmp_path / "l.rrd")])
     assert code == 0
     with open(out, newline="") as fh:
         rows = list(csv.DictReader(fh))
-    gt = np.genfromtxt(tmp_path / "ground_truth.csv", delimiter=",", names=True)
+    gt = np.genfromtxt(src / "ground_truth.csv", delimiter=",", names=True)
     assert len(rows) == len(gt) and all(r["fix"] == "used" for r in rows)
     err = np.array([float(r["error_m"]) for r in rows])
     assert np.median(err) < 0.002  # 2 mm
@@ -39,14 +40,15 @@ def test_localize_needs_fps_for_folders_and_a_valid_map(tmp_path, capsys):
 
 
 def test_imu_as_control_input_lowers_the_velocity_error(tmp_path):
-    assert main(["render", "localize", str(tmp_path), "--seconds", "1.5", "--fps", "30", "--seed", "5"]) == 0
-    gt = np.genfromtxt(tmp_path / "ground_truth.csv", delimiter=",", names=True)
+    src = tmp_path / "flight"
+    assert main(["render", "localize", str(src), "--seconds", "1.5", "--fps", "30", "--seed", "5"]) == 0
+    gt = np.genfromtxt(src / "ground_truth.csv", delimiter=",", names=True)
     true_v = np.stack([gt["vx"], gt["vy"], gt["vz"]], axis=1)
 
     def velocity_rms(extra):
         out = tmp_path / "est.csv"
-        assert main(["localize", str(tmp_path), "--camera", str(tmp_path / "camera.yml"), "--map",
-                     str(tmp_path / "map.yml"), "--dict", "DICT_4X4_100", "--fps", "30", "--out", str(out),
+        assert main(["localize", str(src), "--camera", str(src / "camera.yml"), "--map",
+                     str(src / "map.yml"), "--dict", "DICT_4X4_100", "--fps", "30", "--out", str(out),
                      "--quiet", *extra]) == 0
         with open(out, newline="") as fh:
             rows = list(csv.DictReader(fh))
@@ -55,5 +57,5 @@ def test_imu_as_control_input_lowers_the_velocity_error(tmp_path):
         return float(np.sqrt(np.mean(np.sum((v - true_v)[10:] ** 2, axis=1)))), p
 
     plain, _ = velocity_rms([])
-    fused, _ = velocity_rms(["--imu", str(tmp_path / "imu.csv")])
+    fused, _ = velocity_rms(["--imu", str(src / "imu.csv")])
     assert fused < 0.8 * plain, (fused, plain)

@@ -5,6 +5,7 @@ import socket
 
 import cv2
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation
 
 from tests.pose.test_relative import BODY, REFERENCE, SIZE, two_map_scene
@@ -72,3 +73,23 @@ def test_track_needs_fps_for_an_image_folder(tmp_path, capsys):
                  "--reference", str(tmp_path / "ref.yml"), "--quiet"])
     assert code == 2
     assert "--fps" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["render", "map", "{ref}", "{tmp}/sheet"], "cannot write an image"),
+    (["render", "map", "{ref}", "{tmp}/sheet.png", "--dpi", "1e6"], "at most 2400"),
+    (["render", "map", "{ref}", "{ref}"], "overwritten"),
+    (["render", "localize", "{tmp}/loc", "--seconds", "1e9"], "at most 5000"),
+    (["sim", "hover", "--seconds", "1e8"], "at most 3600"),
+])
+def test_requests_it_cannot_meet_are_one_line_errors_before_any_work(tmp_path, capsys, argv, message):
+    REFERENCE.to_file(tmp_path / "ref.yml")
+    before = (tmp_path / "ref.yml").read_bytes()
+    try:
+        code = main([a.format(ref=tmp_path / "ref.yml", tmp=tmp_path) for a in argv])
+    except SystemExit as exc:  # argparse's own checks
+        code = exc.code
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and message in err
+    assert (tmp_path / "ref.yml").read_bytes() == before
+    assert not (tmp_path / "loc").exists() and not (tmp_path / "sheet").exists()

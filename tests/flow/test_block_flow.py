@@ -50,7 +50,7 @@ def test_identical_and_uniform_frames():
     "prev, curr, exc, word",
     [
         (np.zeros((240, 320), np.uint8), np.zeros((240, 321), np.uint8), ValueError, "same size"),
-        (np.zeros((240, 320), np.float32), np.zeros((240, 320), np.uint8), TypeError, "prev"),
+        (np.zeros((240, 320), np.int32), np.zeros((240, 320), np.uint8), TypeError, "prev"),
         (np.zeros((8, 8), np.uint8), np.zeros((8, 8), np.uint8), ValueError, "16 x 16"),
     ],
 )

@@ -81,7 +81,7 @@ def test_bad_arguments_name_the_argument() -> None:
     with pytest.raises(ValueError, match=r"camera\.K"):
         draw_markers(image, det, [FACING], SimpleNamespace(K=np.eye(2), dist=None), 0.1)
     with pytest.raises(TypeError, match="image"):
-        draw_markers(image.astype(float), det)  # type: ignore[arg-type]
+        draw_markers(image.astype(np.int32), det)  # type: ignore[arg-type]
     bad = MarkerDetection(1, np.zeros((3, 2)))
     with pytest.raises(ValueError, match=r"detections\[0\]\.corners"):
         draw_markers(image, [bad])

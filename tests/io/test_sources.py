@@ -216,3 +216,33 @@ def test_image_list_source_directly(tmp_path: Path) -> None:
     with ImageListSource([str(p) for p in paths], fps=10) as source:
         assert repr(source) == "<ImageListSource: 2 images>"
         assert [f.time for f in source] == [0.0, 0.1]
+
+
+def test_12bit_data_in_a_16bit_png_is_read_by_its_depth_not_as_nearly_black(tmp_path: Path) -> None:
+    img12 = np.array([[0, 4095, 2048], [16, 1000, 3000]], np.uint16)  # a 12-bit sensor's values
+    image, error = read_image(_write(tmp_path / "d12.png", img12))
+    assert error is None
+    np.testing.assert_array_equal(image, img12 >> 4)  # its top 8 bits: 4095 -> 255
+    img8 = np.array([[0, 200], [17, 255]], np.uint16)  # 8-bit values in a 16-bit file stay as they are
+    np.testing.assert_array_equal(read_image(_write(tmp_path / "d8.png", img8))[0], img8)
+
+
+def test_float_images_are_read_by_their_range(tmp_path: Path) -> None:
+    from visloc.images import to_uint8
+
+    np.testing.assert_array_equal(to_uint8(np.array([[0.0, 0.5, 1.0]], np.float32)), [[0, 128, 255]])
+    np.testing.assert_array_equal(to_uint8(np.array([[0.0, 100.4, 255.0]], np.float32)), [[0, 100, 255]])
+    np.testing.assert_array_equal(to_uint8(np.array([[np.nan, 2.0, 4095.0]])), [[0, 0, 255]])
+    grey = np.arange(0, 250, 10, dtype=np.float32).reshape(5, 5)  # a float TIFF holding 0..255
+    image, error = read_image(_write(tmp_path / "f.tiff", grey))
+    assert error is None and np.array_equal(image, grey.astype(np.uint8))
+    with pytest.raises(TypeError, match="unsupported pixel type"):
+        to_uint8(np.zeros((2, 2), np.int32))
+
+
+def test_an_image_too_small_to_use_is_an_unreadable_frame_and_the_folder_goes_on(tmp_path: Path) -> None:
+    _write(tmp_path / "a.png", np.full((1, 1), 255, np.uint8))
+    _write(tmp_path / "b.png", _grey(3))
+    frames = list(open_source(str(tmp_path)))
+    assert frames[0].image is None and "at least 2 x 2" in frames[0].error
+    assert frames[1].image is not None

@@ -125,4 +125,4 @@ def test_annotation_sink_bad_arguments(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="target"):
         AnnotationSink(existing)
     with AnnotationSink(tmp_path / "out") as sink, pytest.raises(TypeError, match="image"):
-        sink.write(np.zeros((4, 4), np.float32))  # type: ignore[arg-type]
+        sink.write(np.zeros((4, 4), np.int32))  # type: ignore[arg-type]

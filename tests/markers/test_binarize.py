@@ -19,8 +19,8 @@ def test_to_gray_converts_bgr_and_keeps_gray():
     [
         (np.zeros((0, 5), np.uint8), ValueError),
         (np.zeros((1, 1), np.uint8), ValueError),
-        (np.zeros((4, 5), np.float32), TypeError),
-        (np.full((4, 5), np.nan), TypeError),
+        (np.zeros((4, 5), np.int32), TypeError),
+        (np.full((4, 5), np.nan), ValueError),
         (np.zeros((4, 5, 2), np.uint8), ValueError),
         (np.zeros((2, 4, 5, 3), np.uint8), ValueError),
         ([[1, 2], [3, 4]], TypeError),

@@ -192,8 +192,8 @@ def test_bgr_input_gives_the_same_result(detector):
     [
         (np.zeros((0, 0), np.uint8), ValueError),
         (np.zeros((1, 1), np.uint8), ValueError),
-        (np.zeros((40, 40), np.float64), TypeError),
-        (np.full((40, 40), np.nan), TypeError),
+        (np.zeros((40, 40), np.int32), TypeError),
+        (np.full((40, 40), np.nan), ValueError),
         (np.zeros((40, 40, 2), np.uint8), ValueError),
         ("image.png", TypeError),
     ],
@@ -339,3 +339,14 @@ def test_curved_sides_give_the_corners_under_lens_distortion(k1):
         assert max(errs[False]) > 0.3  # what the straight sides miss by
     else:
         assert max(errs[True]) <= max(errs[False]) + 0.002
+
+
+def test_deeper_pixel_types_are_read_as_their_uint8_equivalent(detector):
+    image = random_scene(2, size=(320, 240), difficulty="easy", camera=True).image
+    base = detector.detect(image)
+    for deep in (image.astype(np.uint16) << 4, image.astype(np.float32), image / 255.0):  # 12-bit, 0..255, 0..1
+        dets = detector.detect(deep)
+        assert [d.id for d in dets] == [d.id for d in base] and len(base) > 0
+        assert all(np.abs(a.corners - b.corners).max() < 0.05 for a, b in zip(dets, base, strict=True))
+    with pytest.raises(TypeError, match="uint8"):
+        detector.detect(image.astype(np.int32))

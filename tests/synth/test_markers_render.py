@@ -279,7 +279,7 @@ FLAT = np.full((480, 640), 128, np.uint8)
         ({"jpeg_quality": 0}, ValueError, "jpeg_quality"),
         ({"background": "marble"}, ValueError, "background"),
         ({"background": FLAT[:10]}, ValueError, "background"),
-        ({"background": FLAT.astype(float)}, TypeError, "background"),
+        ({"background": FLAT.astype(np.int32)}, TypeError, "background"),
         ({"rng": "seed"}, TypeError, "rng"),
     ],
 )

@@ -96,6 +96,10 @@ def render(args: argparse.Namespace) -> int:
     print(f"visloc render: wrote {args.n} frames and ground_truth.json to {path}")
     return 0
 
+#: largest map image (pixels, 200 MB as uint8): a 1.2 m square sheet at 300 dpi
+MAX_MAP_PIXELS = 200_000_000
+
+
 def render_map(args: argparse.Namespace) -> int:
     """``visloc render map``: the markers of a map drawn to scale in its z = 0 plane."""
     import cv2
@@ -103,6 +107,8 @@ def render_map(args: argparse.Namespace) -> int:
     from visloc.markers.dictionary import load_dictionary
     from visloc.pose.maps import MarkerMap
 
+    if not cv2.haveImageWriter(args.output):
+        raise UsageError(f"render map: OpenCV cannot write an image named {args.output}: use .png, .jpg, .tif, ...")
     mmap = MarkerMap.from_file(args.map)
     dic = load_dictionary(args.dict)
     pts = np.concatenate([mmap.corners_of(int(i)) for i in mmap.ids])
@@ -116,6 +122,9 @@ def render_map(args: argparse.Namespace) -> int:
     lo = pts[:, :2].min(axis=0) - margin
     hi = pts[:, :2].max(axis=0) + margin
     w, h = (int(np.ceil(v)) for v in (hi - lo) * px_per_m)
+    if w * h > MAX_MAP_PIXELS:
+        raise UsageError(f"render map: {w} x {h} px at {args.dpi:g} dpi is over {MAX_MAP_PIXELS / 1e6:g} Mpx: "
+                         "lower --dpi")
     canvas = np.full((h, w), 255, np.uint8)
     cells = dic.marker_size + 2
     for i in mmap.ids:

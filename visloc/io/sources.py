@@ -26,6 +26,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from visloc.images import to_uint8
 from visloc.io.closing import Closing
 from visloc.types import Frame
 
@@ -88,14 +89,10 @@ def _to_uint8(image: NDArray) -> NDArray[np.uint8]:
             raise ValueError(f"unsupported channel count {channels}")
     elif image.ndim != 2:
         raise ValueError(f"unsupported image shape {image.shape}")
-    if image.dtype == np.uint8:
-        out = image
-    elif image.dtype == np.uint16:
-        out = (image >> 8).astype(np.uint8)  # full 16-bit range onto 0..255, like cv2.imread
-    elif np.issubdtype(image.dtype, np.floating):
-        out = np.clip(np.nan_to_num(image) * 255.0 + 0.5, 0, 255).astype(np.uint8)
-    else:
-        raise ValueError(f"unsupported pixel type {image.dtype}")
+    try:
+        out = to_uint8(image)
+    except TypeError as exc:
+        raise ValueError(str(exc)) from None
     return np.ascontiguousarray(out)
 
 
@@ -103,9 +100,10 @@ def read_image(path: str | os.PathLike[str]) -> tuple[NDArray[np.uint8] | None, 
     """Read an image file as uint8 grey or BGR, reporting failure instead of raising.
 
     The file is decoded with ``cv2.imdecode(..., IMREAD_UNCHANGED)`` (so non-ASCII paths work
-    everywhere) and converted: 16-bit images are scaled by 1/256 (the full 16-bit range onto
-    0..255, as ``cv2.imread`` does), floating-point images are taken to span [0, 1], an alpha
-    channel is dropped and single-channel images stay grey.
+    everywhere) and converted: 16-bit and floating-point pixels by :func:`visloc.images.to_uint8`
+    (16-bit by the bit depth their values fit in, so 12-bit data in a 16-bit PNG is not read as
+    nearly black; floats as 0..1 or 0..255 by their range), an alpha channel is dropped and
+    single-channel images stay grey. Images smaller than 2 x 2 pixels are not read.
 
     Parameters
     ----------
@@ -127,6 +125,8 @@ def read_image(path: str | os.PathLike[str]) -> tuple[NDArray[np.uint8] | None, 
     decoded = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
     if decoded is None:
         return None, f"cannot read image {name}"
+    if decoded.shape[0] < 2 or decoded.shape[1] < 2:
+        return None, f"cannot read image {name}: {decoded.shape[1]} x {decoded.shape[0]} px, at least 2 x 2 needed"
     try:
         return _to_uint8(decoded), None
     except ValueError as exc:

@@ -146,7 +146,7 @@ def build_parser() -> argparse.ArgumentParser:
     rp = rs.add_parser("map", help="a printable image of a marker map (its z = 0 plane)")
     rp.add_argument("map", help="marker map (OpenCV YAML)")
     rp.add_argument("output", help="output image (.png)")
-    rp.add_argument("--dict", default="DICT_4X4_50", metavar="NAME|FILE", help="marker dictionary")
+    rp.add_argument("--dict", default=None, metavar="NAME|FILE", help="marker dictionary (default: the one the map records, else DICT_4X4_50)")
     rp.add_argument("--dpi", type=_at_most(2400, "a printer's resolution"), default=300.0,
                     help="dots per inch (default 300, at most 2400)")
     rl = rs.add_parser("localize", help="a downward camera flying over a marker grid + ground truth")
@@ -181,7 +181,7 @@ def build_parser() -> argparse.ArgumentParser:
     lz.add_argument("source", help="image, folder, glob pattern, video file or camera index")
     lz.add_argument("--camera", required=True, metavar="FILE", help="camera file (OpenCV YAML)")
     lz.add_argument("--map", required=True, metavar="MAP.yml", help="marker map (OpenCV YAML)")
-    lz.add_argument("--dict", default="DICT_4X4_50", metavar="NAME|FILE", help="marker dictionary")
+    lz.add_argument("--dict", default=None, metavar="NAME|FILE", help="marker dictionary (default: the one the map records, else DICT_4X4_50)")
     lz.add_argument("--fps", type=_positive, help="frame rate (required for image folders)")
     lz.add_argument("--accel-noise", type=_positive, default=2.0, metavar="A",
                     help="Kalman process noise: white acceleration std, m/s^2 (default 2)")
@@ -203,7 +203,7 @@ def build_parser() -> argparse.ArgumentParser:
     tk.add_argument("--camera", required=True, metavar="FILE", help="camera file (OpenCV YAML)")
     tk.add_argument("--body", required=True, metavar="BODY.yml", help="marker map of the tracked body")
     tk.add_argument("--reference", required=True, metavar="REF.yml", help="marker map of the reference")
-    tk.add_argument("--dict", default="DICT_4X4_50", metavar="NAME|FILE", help="marker dictionary")
+    tk.add_argument("--dict", default=None, metavar="NAME|FILE", help="marker dictionary (default: the one the map records, else DICT_4X4_50)")
     tk.add_argument("--out", metavar="FILE.jsonl", help="write one JSON pose per frame")
     tk.add_argument("--udp", nargs="?", const="127.0.0.1:5005", metavar="HOST:PORT",
                     help="also send each JSON pose as a UDP datagram (default 127.0.0.1:5005)")

@@ -59,3 +59,38 @@ def test_imu_as_control_input_lowers_the_velocity_error(tmp_path):
     plain, _ = velocity_rms([])
     fused, _ = velocity_rms(["--imu", str(src / "imu.csv")])
     assert fused < 0.8 * plain, (fused, plain)
+
+
+def test_a_camera_file_for_another_size_is_scaled_with_one_warning(tmp_path, capsys):
+    from visloc.pose import Camera
+    from visloc.synth import write_camera_yml
+
+    src = tmp_path / "flight"
+    assert main(["render", "localize", str(src), "--seconds", "0.2", "--fps", "30", "--seed", "3"]) == 0
+    cam = Camera.from_file(src / "camera.yml")
+    w, h = cam.size
+    big = cam.scaled(2 * w, 2 * h)
+    write_camera_yml(tmp_path / "big.yml", big.K, (2 * w, 2 * h))
+    capsys.readouterr()
+    out = tmp_path / "est.csv"
+    assert main(["localize", str(src), "--camera", str(tmp_path / "big.yml"), "--map", str(src / "map.yml"),
+                 "--dict", "DICT_4X4_100", "--fps", "30", "--out", str(out), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert err.count("scaling it") == 1 and f"{2 * w}x{2 * h}" in err
+    with open(out, newline="") as fh:
+        assert all(r["fix"] == "used" for r in csv.DictReader(fh))  # the scaled camera is the right one
+
+
+def test_localize_reads_the_maps_dictionary_and_refuses_another(tmp_path, capsys):
+    src = tmp_path / "flight"
+    assert main(["render", "localize", str(src), "--seconds", "0.2", "--fps", "30", "--seed", "4"]) == 0
+    base = ["localize", str(src), "--camera", str(src / "camera.yml"), "--map", str(src / "map.yml"), "--fps", "30",
+            "--quiet"]
+    out = tmp_path / "est.csv"
+    assert main([*base, "--out", str(out)]) == 0  # no --dict: the map's DICT_4X4_100
+    with open(out, newline="") as fh:
+        assert all(r["fix"] == "used" for r in csv.DictReader(fh))
+    capsys.readouterr()
+    assert main([*base, "--dict", "DICT_4X4_50"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "DICT_4X4_100" in err

@@ -130,3 +130,31 @@ def test_refine_rejects_bad_input():
         refine_quads(img, quad, radius=0)
     with pytest.raises(ValueError, match="count"):
         refine_quads(img, quad, count=1)
+
+
+@pytest.mark.parametrize("native", ENGINES)
+def test_corners_or_radii_it_cannot_use_are_refused(native):
+    gray = np.zeros((100, 100), np.uint8)
+    gray[30:70, 30:70] = 255
+    quad = np.array([[[29.5, 29.5], [69.5, 29.5], [69.5, 69.5], [29.5, 69.5]]])
+    bad = quad.copy()
+    bad[0, 1, 1] = np.nan
+    with pytest.raises(ValueError, match="finite"):
+        refine_quads(gray, bad, native=native)
+    with pytest.raises(ValueError, match="radius"):
+        refine_quads(gray, quad, radius=10**9, native=native)  # the work grows with it
+
+
+@pytest.mark.skipif(not NATIVE_REFINE, reason="calls the compiled stage 8 directly")
+def test_the_compiled_stage_checks_its_own_arguments_and_far_corners_read_the_border():
+    from visloc.markers import _refine
+    from visloc.markers.response import response_lut
+
+    gray = np.zeros((100, 100), np.uint8)
+    lut = response_lut("srgb")
+    for quad, r, word in ((np.full((1, 4, 2), np.nan), 2, "finite"), (np.full((1, 4, 2), 50.0), 10**9, "radius")):
+        with pytest.raises(ValueError, match=word):
+            _refine.refine_quads(gray, 100, 100, quad, np.array([r], np.int64), 2, 24, 0.15, lut, True)
+    far = np.array([[[1e300, -1e300], [2e300, -1e300], [2e300, 1e300], [1e300, 1e300]]])  # finite, far outside
+    _, ok = _refine.refine_quads(gray, 100, 100, far, np.array([2], np.int64), 2, 24, 0.15, lut, True)
+    assert not np.frombuffer(ok, np.uint8).any()  # no contrast there: not refined, and no crash

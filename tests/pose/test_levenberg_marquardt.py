@@ -51,3 +51,14 @@ def test_a_parameter_without_effect_takes_the_pseudo_inverse_step():
     want = levenberg_marquardt(start, X, xy, f, 10, native=False)
     assert np.isfinite(got[0]).all() and got[1][0] < 1e-6
     np.testing.assert_allclose(got[1], want[1], atol=1e-9)
+
+
+@pytest.mark.parametrize("native", [False, True] if NATIVE_LM else [False])
+def test_arrays_of_the_wrong_shape_are_refused_before_the_solver(native):
+    X = np.zeros((3, 4))
+    xy = np.zeros((2, 4))
+    f = np.array([[300.0], [300.0]])
+    for args, word in (((np.zeros((1, 5)), X, xy, f, 5), "params"), ((np.zeros((1, 6)), X.T, xy, f, 5), "X must"),
+                       ((np.zeros((1, 6)), X, xy[:, :3], f, 5), "X must"), ((np.zeros((1, 6)), X, xy, f, -1), "max_iter")):
+        with pytest.raises(ValueError, match=word):
+            levenberg_marquardt(*args, native=native)

@@ -140,3 +140,15 @@ def test_options_it_cannot_use_are_refused_not_half_used(kw):
     g = GridMap(2, 2, 0.1, 0.05)
     with pytest.raises(ValueError, match="must be a"):
         estimate_camera_pose([MarkerDetection(0, np.array([[0, 0], [10, 0], [10, 10], [0, 10.0]]))], g, CAM, **kw)
+
+
+def test_a_map_records_its_dictionary_and_an_empty_map_is_refused(tmp_path):
+    g = GridMap(2, 3, 0.1, 0.05, dictionary="DICT_4X4_100")
+    g.to_file(tmp_path / "m.yml")
+    back = MarkerMap.from_file(tmp_path / "m.yml")
+    assert back.dictionary == "DICT_4X4_100" and len(back) == 6
+    GridMap(1, 1, 0.1, 0.0).to_file(tmp_path / "plain.yml")
+    assert MarkerMap.from_file(tmp_path / "plain.yml").dictionary is None
+    (tmp_path / "empty.yml").write_text("%YAML:1.0\nmarkers: []\n")
+    with pytest.raises(ValueError, match="no markers"):
+        MarkerMap.from_file(tmp_path / "empty.yml")

@@ -223,6 +223,7 @@ GOOD = np.array([[300.0, 200.0], [340.0, 200.0], [340.0, 240.0], [300.0, 240.0]]
         (np.where(np.eye(4, 2, dtype=bool), np.inf, GOOD), "corners"),
         (np.full((4, 2), 100.0), "corners"),
         (np.array([[0.0, 0.0], [1.0, 1.0], [2.0, 2.0], [3.0, 3.0]]), "corners"),
+        (GOOD[::-1], "counter-clockwise"),  # a mirrored marker: its pose would face away
     ],
 )
 def test_bad_corners(corners: np.ndarray, match: str) -> None:
@@ -260,3 +261,9 @@ def test_pose_error_inputs() -> None:
         pose_error(pose, np.eye(2), np.zeros(3))
     with pytest.raises(ValueError, match="t_true"):
         pose_error(pose, np.eye(3), np.zeros(2))
+
+
+def test_corners_too_narrow_for_pixel_coordinates_are_refused() -> None:
+    with pytest.raises(TypeError, match="wrap"):
+        estimate_marker_pose(GOOD.astype(np.uint8), L, PINHOLE)  # 300 px would read as 44
+    assert estimate_marker_pose(GOOD.astype(np.int32), L, PINHOLE) is not None

@@ -17,6 +17,26 @@ def warn(command: str, text: str) -> None:
     tqdm.write(f"visloc {command}: warning: {text}", file=sys.stderr)
 
 
+def dictionary_for(args: argparse.Namespace, command: str, *maps) -> str:
+    """The dictionary of a command that reads marker maps: ``--dict`` when given (a map that
+    records another one is a :class:`visloc.cli.UsageError`), else the one the maps record,
+    else DICT_4X4_50 with a warning. Sets ``args.dict``."""
+    from visloc.cli import UsageError
+
+    recorded = {m.dictionary for m in maps if m.dictionary}
+    if len(recorded) > 1:
+        raise UsageError(f"the maps record different dictionaries: {', '.join(sorted(recorded))}")
+    if args.dict is not None:
+        if recorded and recorded != {args.dict}:
+            raise UsageError(f"--dict {args.dict} but the map records {recorded.pop()}")
+    elif recorded:
+        args.dict = recorded.pop()
+    else:
+        args.dict = "DICT_4X4_50"
+        warn(command, "the map records no dictionary: using DICT_4X4_50 (give --dict)")
+    return args.dict
+
+
 def detector_for(args: argparse.Namespace) -> MarkerDetector:
     """The marker detector of ``--dict``, ``--response``, ``--border-bits`` and ``--inverted``;
     with ``--fast`` it searches shrunk images (:data:`visloc.markers.FAST_PASSES`)."""
@@ -54,13 +74,14 @@ def marker_records(dets: list[MarkerDetection], poses: list[Pose | None] | None)
         out.append(rec)
     return out
 
-def camera_for(camera: Camera, shape: tuple[int, ...], warned: list[bool]) -> Camera:
-    """The camera scaled to a frame's size when its file names another size (warn once)."""
+def camera_for(camera: Camera, shape: tuple[int, ...], warned: list[bool], command: str = "detect") -> Camera:
+    """The camera scaled to a frame's size when its file names another size (``command``
+    warns once: ``warned[0]`` says whether it has)."""
     h, w = shape[:2]
     if camera.size is None or tuple(camera.size) == (w, h):
         return camera
     if not warned[0]:
-        warn("detect", f"camera file is for {camera.size[0]}x{camera.size[1]}, frames are {w}x{h}: scaling it")
+        warn(command, f"camera file is for {camera.size[0]}x{camera.size[1]}, frames are {w}x{h}: scaling it")
         warned[0] = True
     return camera.scaled(w, h)
 

@@ -66,6 +66,7 @@ def flow(args: argparse.Namespace) -> int:
         rec = stack.enter_context(RerunLogger(args.rerun)) if args.rerun else None
         ego: EgoMotion | None = None
         last_time = 0.0
+        warned = [False]
         for frame in frames_of(source, args):
             n_frames += 1
             row = {"frame": frame.index, "time": frame.time, "source": frame.name}
@@ -80,7 +81,7 @@ def flow(args: argparse.Namespace) -> int:
                 height = heights.get(frame.index)
                 if height is None:
                     raise UsageError(f"--height-csv has no height for frame {frame.index}")
-            cam = camera_for(camera, frame.image.shape, [True])
+            cam = camera_for(camera, frame.image.shape, warned, "flow")
             if ego is None or ego.frame_shape != frame.image.shape[:2]:
                 if ego is not None:
                     warn("flow", f"{frame.name} has another size than the frame before: the track restarts")

@@ -13,6 +13,7 @@ from visloc.cli import UsageError
 from visloc.commands._common import (
     camera_for,
     detector_for,
+    dictionary_for,
     frames_of,
     open_timed_source,
     read_columns,
@@ -33,7 +34,7 @@ def render_localize(args: argparse.Namespace) -> int:
     from visloc.synth import write_camera_yml
     from visloc.synth.grid import FLIGHT_CAMERA, render_map_flight
 
-    grid = GridMap(**LOCALIZE_GRID)
+    grid = GridMap(**LOCALIZE_GRID, dictionary="DICT_4X4_100")
     flight = render_map_flight(args.seconds, args.fps, grid, seed=args.seed, dictionary="DICT_4X4_100",
                                background="gravel", camera=FLIGHT_CAMERA)
     out = Path(args.outdir)
@@ -70,9 +71,10 @@ def localize(args: argparse.Namespace) -> int:
     from visloc.pose.map_pose import estimate_camera_pose
     from visloc.pose.maps import MarkerMap
 
+    mmap = MarkerMap.from_file(args.map)
+    dictionary_for(args, "localize", mmap)
     detector = detector_for(args)
     camera = Camera.from_file(args.camera)
-    mmap = MarkerMap.from_file(args.map)
     truth = read_columns(args.truth, "--truth", ("t", "x", "y", "z")) if args.truth else None
     imu = _read_imu(args.imu) if args.imu else None
     kf = PositionVelocityKF(3, model="cv", accel_noise=args.accel_noise)
@@ -85,6 +87,7 @@ def localize(args: argparse.Namespace) -> int:
         source = open_timed_source(stack, args)
         out = stack.enter_context(CsvWriter(args.out, LOCALIZE_COLUMNS)) if args.out else None
         rec = stack.enter_context(RerunLogger(args.rerun)) if args.rerun else None
+        warned = [False]
         for frame in frames_of(source, args):
             n_frames += 1
             row: dict = {"frame": frame.index, "time": frame.time, "source": frame.name}
@@ -94,7 +97,7 @@ def localize(args: argparse.Namespace) -> int:
                 if out:
                     out.write(row | {"fix": "unreadable"})
                 continue
-            cam = camera_for(camera, frame.image.shape, [True])
+            cam = camera_for(camera, frame.image.shape, warned, "localize")
             mp = estimate_camera_pose(detector.detect(frame.image), mmap, cam)
             accel = None
             if imu is not None and R_map_cam is not None and last_t is not None:
@@ -142,10 +145,11 @@ def track(args: argparse.Namespace) -> int:
     from visloc.pose.maps import MarkerMap
     from visloc.pose.relative import track_body
 
-    detector = detector_for(args)
-    camera = Camera.from_file(args.camera)
     body = MarkerMap.from_file(args.body)
     reference = MarkerMap.from_file(args.reference)
+    dictionary_for(args, "track", body, reference)
+    detector = detector_for(args)
+    camera = Camera.from_file(args.camera)
     target = None
     if args.udp:
         host, _, port = args.udp.rpartition(":")
@@ -159,6 +163,7 @@ def track(args: argparse.Namespace) -> int:
         source = open_timed_source(stack, args)
         out = stack.enter_context(JsonlWriter(args.out)) if args.out else None
         sock = stack.enter_context(socket.socket(socket.AF_INET, socket.SOCK_DGRAM)) if target else None
+        warned = [False]
         for frame in frames_of(source, args):
             n_frames += 1
             rec: dict = {"frame": frame.index, "source": frame.name, "time": frame.time}
@@ -167,7 +172,7 @@ def track(args: argparse.Namespace) -> int:
                 warn("track", frame.error or f"cannot read {frame.name}")
                 rec["error"] = frame.error
             else:
-                cam = camera_for(camera, frame.image.shape, [True])
+                cam = camera_for(camera, frame.image.shape, warned, "track")
                 bp = track_body(detector.detect(frame.image), body, reference, cam)
                 dt = None if last_time is None else frame.time - last_time
                 if dt is not None and not dt > 0:

@@ -12,7 +12,14 @@ import numpy as np
 from tqdm import tqdm
 
 from visloc.cli import UsageError
-from visloc.commands._common import camera_for, detector_for, frames_of, marker_records, warn
+from visloc.commands._common import (
+    camera_for,
+    detector_for,
+    dictionary_for,
+    frames_of,
+    marker_records,
+    warn,
+)
 from visloc.commands.flow import render_flow
 from visloc.commands.localize import render_localize
 from visloc.io import AnnotationSink, JsonlWriter, RerunLogger, draw_markers, open_source
@@ -110,7 +117,7 @@ def render_map(args: argparse.Namespace) -> int:
     if not cv2.haveImageWriter(args.output):
         raise UsageError(f"render map: OpenCV cannot write an image named {args.output}: use .png, .jpg, .tif, ...")
     mmap = MarkerMap.from_file(args.map)
-    dic = load_dictionary(args.dict)
+    dic = load_dictionary(dictionary_for(args, "render", mmap))
     pts = np.concatenate([mmap.corners_of(int(i)) for i in mmap.ids])
     if np.abs(pts[:, 2]).max() > 1e-6:
         raise UsageError(f"map {args.map} has markers off the z = 0 plane: it cannot be printed as one sheet")

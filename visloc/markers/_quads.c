@@ -132,6 +132,7 @@ static int fit_one(const int32_t *p, int64_t n, const double *hint, double sigma
     for (int64_t j = 0; j < nf; j++) dist[j] = hypot(p[2 * j * f] - cx, p[2 * j * f + 1] - cy);
     /* circular Gaussian smoothing */
     double s = sigma > 0 ? sigma / (double)f : ((double)nf / 100.0 > 1.0 ? (double)nf / 100.0 : 1.0);
+    if (!(s < 1e6)) s = 1e6; /* NaN or huge: the conversion below stays defined (r is capped next) */
     int64_t r = (int64_t)ceil(3 * s);
     if (r > (nf - 1) / 2) r = (nf - 1) / 2;
     if (r >= 1) {
@@ -178,7 +179,8 @@ static int fit_one(const int32_t *p, int64_t n, const double *hint, double sigma
     for (int side = 0; side < 4; side++) {
         int64_t a = peaks[side], b = peaks[(side + 1) % 4];
         int64_t length = ((b - a) % n + n) % n;
-        int64_t pad = (int64_t)(padding * (double)length) + 1;
+        double frac = padding >= 0.0 && padding <= 0.5 ? padding : 0.5; /* NaN too */
+        int64_t pad = (int64_t)(frac * (double)length) + 1;
         int64_t size = length - 2 * pad + 1;
         if (size < 2) return 0;
         for (int64_t o = 0; o < size; o++) {

@@ -50,6 +50,10 @@ static double to_grey(const double *lut, double v) {
 
 /* Bilinear grey level at (x, y), pixel centres at integers, borders replicated. */
 static double sample(const image *im, double x, double y) {
+    /* beyond a pixel outside the image every point reads the border: clamp first, so the
+     * integer conversions below stay defined for any x, y (NaN reads the corner pixel) */
+    x = isnan(x) || x < -1.0 ? -1.0 : (x > (double)im->w ? (double)im->w : x);
+    y = isnan(y) || y < -1.0 ? -1.0 : (y > (double)im->h ? (double)im->h : y);
     double fx = floor(x), fy = floor(y);
     double ax = x - fx, ay = y - fy;
     int64_t x0 = (int64_t)fx, y0 = (int64_t)fy, x1 = x0 + 1, y1 = y0 + 1;
@@ -70,8 +74,8 @@ static double sample(const image *im, double x, double y) {
  * the border clamps when all of them are at least a pixel inside the image. */
 static void sample_line(const image *im, double x0, double y0, double dx, double dy, int64_t n, double *out) {
     double xe = x0 + (double)(n - 1) * dx, ye = y0 + (double)(n - 1) * dy;
-    if (x0 < 0 || xe < 0 || y0 < 0 || ye < 0 || x0 >= im->w - 1 || xe >= im->w - 1 || y0 >= im->h - 1 ||
-        ye >= im->h - 1) {
+    if (!(x0 >= 0 && xe >= 0 && y0 >= 0 && ye >= 0 && x0 < im->w - 1 && xe < im->w - 1 && y0 < im->h - 1 &&
+          ye < im->h - 1)) { /* NaN too: the clamped reads */
         for (int64_t o = 0; o < n; o++) out[o] = sample(im, x0 + (double)o * dx, y0 + (double)o * dy);
         return;
     }
@@ -353,15 +357,21 @@ static PyObject *refine_quads(PyObject *self, PyObject *args) {
         bad = "gray: expected height x width bytes";
     else if (quads.len != k * 8 * (Py_ssize_t)sizeof(double) || radii.len != k * (Py_ssize_t)sizeof(int64_t))
         bad = "quads/radii: expected K x 4 x 2 float64 and K int64 values";
-    else if (count < 2 || iterations < 1)
-        bad = "count must be >= 2 and iterations >= 1";
+    else if (count < 2 || count > 10000 || iterations < 1 || iterations > 100)
+        bad = "count must be 2 to 10000 and iterations 1 to 100";
+    else if (!(end_gap >= 0.0 && end_gap < 0.5))
+        bad = "end_gap must be in [0, 0.5)";
     else if (lut.len != 256 * (Py_ssize_t)sizeof(double))
         bad = "lut: expected 256 float64 values";
     const int64_t *rad = (const int64_t *)radii.buf;
     int64_t r_max = 1;
-    for (Py_ssize_t i = 0; !bad && i < k; i++) {
-        if (rad[i] < 1) bad = "radius must be >= 1";
+    for (Py_ssize_t i = 0; !bad && i < k; i++) { /* bounded: the work buffer grows with it */
+        if (rad[i] < 1 || rad[i] > 64) bad = "radius must be 1 to 64 px";
         if (rad[i] > r_max) r_max = rad[i];
+    }
+    const double *qv = (const double *)quads.buf;
+    for (Py_ssize_t i = 0; !bad && i < 8 * k; i++) {
+        if (!isfinite(qv[i])) bad = "quads: every corner must be finite";
     }
     PyObject *result = NULL;
     if (bad) {

@@ -42,6 +42,9 @@ except ImportError:  # installed without a C compiler: the numpy version below
 NATIVE_REFINE = _refine is not None
 
 _END_GAP = 0.15  # fraction of each side left out at both ends (sample_edge_profiles)
+#: widest profile half-width stage 8 accepts (px): the work grows with it, and no marker edge
+#: is blurred over more
+_MAX_RADIUS = 64
 _LEVELS = np.arange(256, dtype=np.float64)
 _BEND_MIN_SIDE = 40.0  # px: markers with shorter sides keep them straight (as _refine.c)
 
@@ -201,8 +204,10 @@ def refine_quads(
     r = np.broadcast_to(np.asarray(radius, np.int64), (k,))
     if k == 0:
         return q, np.ones(0, bool)
-    if (r < 1).any():
-        raise ValueError(f"radius must be >= 1, got {radius}")
+    if (r < 1).any() or (r > _MAX_RADIUS).any():
+        raise ValueError(f"radius must be 1 to {_MAX_RADIUS} px, got {radius}")
+    if not np.isfinite(q0).all():
+        raise ValueError("quads: every corner must be finite")
     if count < 2 or iterations < 1:
         raise ValueError(f"count must be >= 2 and iterations >= 1, got {count} and {iterations}")
     if use_compiled(native, _refine, "visloc.markers._refine"):

@@ -184,6 +184,14 @@ def levenberg_marquardt(
     """
     x = np.array(params, dtype=np.float64)
     S = len(x)
+    X = np.asarray(X, np.float64)
+    xy = np.asarray(xy, np.float64)
+    if x.ndim != 2 or x.shape[1] != 6:
+        raise ValueError(f"params must have shape (S, 6), got {x.shape}")
+    if X.ndim != 2 or X.shape[0] != 3 or X.shape[1] < 1 or xy.shape != (2, X.shape[1]):
+        raise ValueError(f"X must be (3, N) with N >= 1 and xy (2, N), got {X.shape} and {xy.shape}")
+    if np.shape(f) != (2, 1) or int(max_iter) != max_iter or max_iter < 0:
+        raise ValueError(f"f must be (2, 1) and max_iter a whole number >= 0, got {np.shape(f)} and {max_iter!r}")
     if use_compiled(native, _lm, "visloc.pose._lm"):
         raw_x, raw_cost, raw_M = _lm.levenberg_marquardt(
             np.ascontiguousarray(x), np.ascontiguousarray(X, np.float64), np.ascontiguousarray(xy, np.float64),

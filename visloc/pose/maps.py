@@ -54,6 +54,9 @@ class MarkerMap:
     corners : dict of int -> array_like (4, 3)
         Each marker's corners in OpenCV order (its own top-left, top-right, bottom-right,
         bottom-left), metres. They must form a planar square.
+    dictionary : str or None
+        The marker dictionary the map's ids belong to (an OpenCV name such as
+        ``"DICT_4X4_100"``), saved with the map; ``None``: not recorded.
 
     Raises
     ------
@@ -63,9 +66,12 @@ class MarkerMap:
     """
 
     corners: dict[int, FloatArray]
+    dictionary: str | None = None
     _frames: dict[int, Pose] = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self) -> None:
+        if self.dictionary is not None and (not isinstance(self.dictionary, str) or not self.dictionary.strip()):
+            raise ValueError(f"dictionary must be a name or None, got {self.dictionary!r}")
         clean: dict[int, FloatArray] = {}
         for k, v in dict(self.corners).items():
             arr = np.asarray(v, dtype=np.float64)
@@ -80,13 +86,13 @@ class MarkerMap:
         object.__setattr__(self, "corners", clean)
 
     @classmethod
-    def from_list(cls, markers: list[tuple[int, ArrayLike]]) -> MarkerMap:
+    def from_list(cls, markers: list[tuple[int, ArrayLike]], dictionary: str | None = None) -> MarkerMap:
         """A map from ``[(id, corners (4, 3)), ...]``; duplicate ids raise ValueError."""
         ids = [int(i) for i, _ in markers]
         dup = sorted({i for i in ids if ids.count(i) > 1})
         if dup:
             raise ValueError(f"duplicate marker ids in the map: {dup}")
-        return cls({int(i): c for i, c in markers})
+        return cls({int(i): c for i, c in markers}, dictionary)
 
     @property
     def ids(self) -> NDArray[np.int64]:
@@ -109,7 +115,7 @@ class MarkerMap:
 
     def to_file(self, path: str | Path) -> None:
         """Save as OpenCV FileStorage YAML (see the module docstring)."""
-        lines = ["%YAML:1.0", "markers:"]
+        lines = ["%YAML:1.0"] + ([f'dictionary: "{self.dictionary}"'] if self.dictionary else []) + ["markers:"]
         for i in self.ids:
             nums = ", ".join(repr(float(v)) for v in self.corners[int(i)].ravel())
             lines.append(f"   - {{ id: {int(i)}, corners: [ {nums} ] }}")
@@ -139,6 +145,10 @@ class MarkerMap:
             node = fs.getNode("markers")
             if node.empty() or not node.isSeq():
                 raise ValueError(f"marker map {p} has no 'markers' list")
+            if node.size() == 0:
+                raise ValueError(f"marker map {p} has no markers")
+            dn = fs.getNode("dictionary")
+            dictionary = None if dn.empty() else (dn.string() or None)
             items = []
             for k in range(node.size()):
                 entry = node.at(k)
@@ -151,10 +161,11 @@ class MarkerMap:
                 items.append((int(mid.real()), np.asarray(vals, float).reshape(4, 3)))
         finally:
             fs.release()
-        return cls.from_list(items)
+        return cls.from_list(items, dictionary)
 
 
-def GridMap(rows: int, cols: int, marker_length: float, spacing: float, first_id: int = 0) -> MarkerMap:
+def GridMap(rows: int, cols: int, marker_length: float, spacing: float, first_id: int = 0, *,
+            dictionary: str | None = None) -> MarkerMap:
     """A ``rows x cols`` grid of square markers in the map's z = 0 plane.
 
     Ids run row by row from ``first_id`` (left to right, top to bottom). The map frame has its
@@ -172,6 +183,8 @@ def GridMap(rows: int, cols: int, marker_length: float, spacing: float, first_id
         Gap between neighbouring markers, m (>= 0).
     first_id : int
         Id of the top-left marker (>= 0).
+    dictionary : str, optional
+        The markers' dictionary, recorded with the map (:class:`MarkerMap`).
     """
     for name, v in (("rows", rows), ("cols", cols)):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
@@ -188,4 +201,4 @@ def GridMap(rows: int, cols: int, marker_length: float, spacing: float, first_id
     for r in range(rows):
         for c in range(cols):
             markers[int(first_id) + r * cols + c] = square + (c * pitch, -r * pitch, 0.0)
-    return MarkerMap(markers)
+    return MarkerMap(markers, dictionary)

@@ -104,11 +104,16 @@ def estimate_marker_pose(
     Raises
     ------
     ValueError
-        ``corners`` not (4, 2), not finite, or degenerate (no pose fits); ``marker_length``
-        not finite and > 0; bad ``pixel_sigma``, ``max_iter`` or ``start``.
+        ``corners`` not (4, 2), not finite, degenerate (no pose fits) or counter-clockwise in
+        the image (a marker seen mirrored, which no camera sees); ``marker_length`` not finite
+        and > 0; bad ``pixel_sigma``, ``max_iter`` or ``start``.
     TypeError
-        ``camera`` is not a :class:`Camera`; ``marker_length`` is not a number.
+        ``camera`` is not a :class:`Camera`; ``marker_length`` is not a number; ``corners``
+        of an integer type too narrow for pixel coordinates (8 or 16 bits).
     """
+    raw = np.asarray(corners)
+    if raw.dtype.kind in "iub" and raw.dtype.itemsize < 4:
+        raise TypeError(f"corners of dtype {raw.dtype} cannot hold pixel coordinates (they wrap): pass floats")
     c = np.asarray(corners, dtype=np.float64)
     if c.shape != (4, 2):
         if c.size == 8 and c.squeeze().shape == (4, 2):
@@ -133,6 +138,10 @@ def estimate_marker_pose(
         raise ValueError(
             f"corners are degenerate (coincident, or three of them collinear): {c.tolist()}"
         )
+    x, y = c[:, 0], c[:, 1]
+    if np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y) < 0:  # twice the signed area, y down
+        raise ValueError("corners run counter-clockwise in the image (a mirrored marker): the order is the "
+                         f"marker's top-left, top-right, bottom-right, bottom-left, clockwise: {c.tolist()}")
     L = float(marker_length)
     max_iter = int(max_iter)
 

@@ -11,17 +11,19 @@ import numpy as np
 import pytest
 
 from visloc.io import AnnotationSink, CsvWriter, JsonlWriter, to_jsonable
+from visloc.io.closing import staged_path
 from visloc.types import MarkerDetection, Pose
 
 
 def test_jsonl_lines_are_on_disk_while_the_writer_is_open(tmp_path: Path) -> None:
     path = tmp_path / "out" / "results.jsonl"  # parent folder is created
     det = MarkerDetection(3, np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float))
+    staged = staged_path(path)  # where the lines are until the writer closes
     with JsonlWriter(path) as out:
         out.write({"frame": np.int64(0), "t": np.float32(0.5), "v": np.arange(3)})
-        assert path.read_text().splitlines() == ['{"frame":0,"t":0.5,"v":[0,1,2]}']
+        assert staged.read_text().splitlines() == ['{"frame":0,"t":0.5,"v":[0,1,2]}']
         out.write({"frame": 1, "rms": float("nan"), "markers": [det], "ok": np.bool_(True)})
-        lines = path.read_text().splitlines()
+        lines = staged.read_text().splitlines()
         assert len(lines) == 2 and out.count == 2
         second = json.loads(lines[1])
         assert second["rms"] is None  # strict JSON: NaN -> null
@@ -30,6 +32,7 @@ def test_jsonl_lines_are_on_disk_while_the_writer_is_open(tmp_path: Path) -> Non
         assert second["markers"][0]["corners"][2] == [1.0, 1.0]
         assert " " not in lines[1]  # compact
     assert out.closed
+    assert path.read_text().splitlines() == lines and not staged.exists()
     with pytest.raises(ValueError, match="closed"):
         out.write({"frame": 2})
 
@@ -41,7 +44,7 @@ def test_jsonl_rejects_non_dict_and_unserialisable_values(tmp_path: Path) -> Non
         with pytest.raises(TypeError, match=r"obj\['x'\] has type object"):
             out.write({"x": object()})
         assert out.count == 0
-    assert (tmp_path / "r.jsonl").read_text() == ""
+    assert not (tmp_path / "r.jsonl").exists() and not staged_path(tmp_path / "r.jsonl").exists()
 
 
 def test_to_jsonable_handles_numpy_pose_and_keys() -> None:
@@ -56,10 +59,10 @@ def test_to_jsonable_handles_numpy_pose_and_keys() -> None:
 def test_csv_rows_are_flushed_and_readable(tmp_path: Path) -> None:
     path = tmp_path / "poses.csv"
     with CsvWriter(path, ["frame", "x", "ok", "corners"]) as out:
-        assert path.read_text().strip() == "frame,x,ok,corners"
+        assert staged_path(path).read_text().strip() == "frame,x,ok,corners"
         out.write({"frame": np.int64(0), "x": np.float64(0.25), "corners": np.array([1, 2])})
         out.write({"frame": 1, "x": float("nan")})
-        rows = list(csv.DictReader(path.open(newline="")))
+        rows = list(csv.DictReader(staged_path(path).open(newline="")))
         assert rows == [
             {"frame": "0", "x": "0.25", "ok": "", "corners": "[1,2]"},
             {"frame": "1", "x": "", "ok": "", "corners": ""},
@@ -126,3 +129,19 @@ def test_annotation_sink_bad_arguments(tmp_path: Path) -> None:
         AnnotationSink(existing)
     with AnnotationSink(tmp_path / "out") as sink, pytest.raises(TypeError, match="image"):
         sink.write(np.zeros((4, 4), np.int32))  # type: ignore[arg-type]
+
+
+def test_an_earlier_result_survives_a_run_that_fails_before_its_first_record(tmp_path: Path) -> None:
+    path = tmp_path / "det.jsonl"
+    path.write_text('{"frame":0}\n')
+    with pytest.raises(RuntimeError), JsonlWriter(path):
+        raise RuntimeError("the run failed before any frame")
+    assert path.read_text() == '{"frame":0}\n' and not staged_path(path).exists()
+    with pytest.raises(KeyboardInterrupt), JsonlWriter(path) as out:  # interrupted after a frame
+        out.write({"frame": 7})
+        raise KeyboardInterrupt
+    assert path.read_text() == '{"frame":7}\n'  # what was computed is kept
+    csv_path = tmp_path / "v.csv"
+    csv_path.write_text("frame\n1\n")
+    CsvWriter(csv_path, ["frame"]).close()
+    assert csv_path.read_text() == "frame\n1\n"

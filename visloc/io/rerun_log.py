@@ -36,7 +36,7 @@ import rerun as rr
 from numpy.typing import NDArray
 
 from visloc.images import check_image
-from visloc.io.closing import Closing
+from visloc.io.closing import Closing, commit_staged, staged_path
 from visloc.types import MarkerDetection
 
 __all__ = ["RerunLogger"]
@@ -105,7 +105,7 @@ class RerunLogger(Closing):
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.jpeg_quality = jpeg_quality
         self.recording = rr.RecordingStream(app_id, recording_id=str(uuid.uuid4()))
-        self.recording.save(self.path)
+        self.recording.save(staged_path(self.path))  # renamed over path by close()
         self.recording.log("/", rr.ViewCoordinates.RDF, static=True)
         self._pinhole: tuple[bytes, tuple[int, int]] | None = None
         self._marker_paths: set[str] = set()
@@ -339,4 +339,5 @@ class RerunLogger(Closing):
         self._closed = True
         self.recording.flush()
         self.recording.disconnect()
+        commit_staged(staged_path(self.path), self.path, True)
 

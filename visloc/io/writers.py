@@ -1,8 +1,11 @@
 """Result writers that never lose finished work: JSON Lines, CSV and annotated images/video.
 
 Every writer flushes after each record, so a run that is interrupted (Ctrl-C, crash, power
-cut after the OS wrote its buffers) keeps every frame already written. All are context
-managers.
+cut after the OS wrote its buffers) keeps every frame already written. Files are written
+under a temporary name next to the output (:func:`visloc.io.closing.staged_path`) and renamed
+over it when the writer closes with at least one record, so a run that fails before its first
+record never truncates an earlier result (after a hard crash the frames are in the
+``.name.partial.ext`` file). All are context managers.
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from visloc.images import check_image
-from visloc.io.closing import Closing
+from visloc.io.closing import Closing, commit_staged, staged_path
 from visloc.io.draw import draw_markers
 
 __all__ = ["AnnotationSink", "CsvWriter", "JsonlWriter", "draw_markers", "to_jsonable"]
@@ -79,14 +82,21 @@ def _json_key(key: Any, where: str) -> str:
 
 
 def _open_text(path: str | os.PathLike[str], name: str, **kwargs: Any) -> tuple[Path, TextIO]:
-    """Open ``path`` for writing text, creating missing parent folders."""
+    """Open the staged file of ``path`` for writing text, creating missing parent folders."""
     if not isinstance(path, (str, os.PathLike)):
         raise TypeError(f"{name} must be a str or os.PathLike, got {type(path).__name__}")
     p = Path(path)
     if p.is_dir():
         raise ValueError(f"{name} is a directory, expected a file path: {p}")
     p.parent.mkdir(parents=True, exist_ok=True)
-    return p, open(p, "w", encoding="utf-8", **kwargs)
+    return p, open(staged_path(p), "w", encoding="utf-8", **kwargs)
+
+
+def _close_text(file: TextIO, path: Path, count: int) -> None:
+    """Close a staged text file and put it in place when it holds a record."""
+    if not file.closed:
+        file.close()
+        commit_staged(staged_path(path), path, count > 0)
 
 
 class JsonlWriter(Closing):
@@ -95,7 +105,8 @@ class JsonlWriter(Closing):
     Parameters
     ----------
     path : str or os.PathLike
-        Output file; truncated if it exists, parent folders are created.
+        Output file; parent folders are created. An existing file is replaced when the writer
+        closes having written a record.
 
     Attributes
     ----------
@@ -142,8 +153,9 @@ class JsonlWriter(Closing):
         self.count += 1
 
     def close(self) -> None:
-        """Close the file (idempotent)."""
-        self._file.close()
+        """Close the file and rename it over ``path`` when a record was written, else leave an
+        earlier ``path`` untouched (idempotent)."""
+        _close_text(self._file, self.path, self.count)
 
 
 def _csv_value(value: Any) -> Any:
@@ -161,7 +173,8 @@ class CsvWriter(Closing):
     Parameters
     ----------
     path : str or os.PathLike
-        Output file; truncated if it exists, parent folders are created.
+        Output file; parent folders are created. An existing file is replaced when the writer
+        closes having written a record.
     fieldnames : sequence of str
         Column names, in order; the header is written at once.
 
@@ -215,8 +228,9 @@ class CsvWriter(Closing):
         self.count += 1
 
     def close(self) -> None:
-        """Close the file (idempotent)."""
-        self._file.close()
+        """Close the file and rename it over ``path`` when a record was written, else leave an
+        earlier ``path`` untouched (idempotent)."""
+        _close_text(self._file, self.path, self.count)
 
 
 _UNSAFE = re.compile(r"[^A-Za-z0-9._-]+")
@@ -340,7 +354,7 @@ class AnnotationSink(Closing):
         h, w = img.shape[:2]
         if self._writer is None:
             fourcc = cv2.VideoWriter_fourcc(*self.fourcc)  # type: ignore[misc]
-            writer = cv2.VideoWriter(str(self.target), fourcc, self.fps, (w, h), True)
+            writer = cv2.VideoWriter(str(staged_path(self.target)), fourcc, self.fps, (w, h), True)
             if not writer.isOpened():
                 raise OSError(
                     f"cannot open video writer for {self.target} (codec {self.fourcc}, "
@@ -352,8 +366,11 @@ class AnnotationSink(Closing):
         self._writer.write(np.ascontiguousarray(img))
 
     def close(self) -> None:
-        """Finish the video (idempotent)."""
+        """Finish the video and rename it over ``target`` (idempotent); PNGs are written in
+        place, one per frame."""
         if self._writer is not None:
             self._writer.release()
             self._writer = None
+        if self.is_video and not self._closed:
+            commit_staged(staged_path(self.target), self.target, self.count > 0)
         self._closed = True

@@ -280,8 +280,8 @@ def _inputs(args: argparse.Namespace) -> tuple[list[Path], list[Path]]:
 
 def check_outputs(args: argparse.Namespace) -> None:
     """Refuse (:class:`UsageError`) an output path that is one of the command's input files,
-    is or lies inside an input folder, or is a folder holding an input file: the run would
-    overwrite what it reads."""
+    is or lies inside an input folder, or is a folder holding an input file (the run would
+    overwrite what it reads), or that cannot be written (checked before any work is done)."""
     files, folders = _inputs(args)
     for name in _OUTPUTS:
         v = getattr(args, name, None)
@@ -298,6 +298,9 @@ def check_outputs(args: argparse.Namespace) -> None:
         for f in files:
             if out in f.parents:
                 raise UsageError(f"{what} holds the input {f}: write outputs elsewhere")
+        near = next(a for a in (out, *out.parents) if a.exists())  # the nearest folder that exists
+        if not os.access(near if near.is_dir() else near.parent, os.W_OK):
+            raise UsageError(f"{what}: cannot write there ({near} is not writable)")
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -92,3 +92,13 @@ def test_scenarios_and_bad_input():
         simulate(Scenario("x", "", 1.0, estimator="gps"))
     d = simulate("hover", seconds=0.5).to_dict()
     assert {"status", "settling_time_s", "overshoot_pct", "position_rms_m", "realtime_factor"} <= set(d)
+
+
+def test_ctrl_c_keeps_the_steps_flown_so_far():
+    def stop_after_two_seconds(t):
+        if t >= 2.0:
+            raise KeyboardInterrupt
+
+    r = simulate("hover", seed=0, progress=stop_after_two_seconds)
+    assert r.status is SimStatus.INTERRUPTED and "interrupted at t = 2" in r.reason
+    assert 1.9 < r.t[-1] < 2.1 and np.isfinite(r.state).all() and len(r.t) == len(r.pwm)

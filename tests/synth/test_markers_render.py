@@ -308,3 +308,17 @@ def test_render_markers_rejects_bad_arguments(kwargs, exc, word):
 def test_scene_and_dataset_functions_reject_bad_arguments(call, exc):
     with pytest.raises(exc):
         call()
+
+
+def test_an_interrupted_dataset_keeps_ground_truth_for_its_frames(tmp_path):
+    import json
+
+    def stop(i):
+        if i == 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        render_dataset(tmp_path / "ds", 10, seed=3, size=(160, 120), progress=stop)
+    gt = json.loads((tmp_path / "ds" / "ground_truth.json").read_text())
+    assert [f["file"] for f in gt["frames"]] == [f"frame_{i:04d}.png" for i in range(3)]
+    assert (tmp_path / "ds" / "camera.yml").is_file()

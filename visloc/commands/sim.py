@@ -27,7 +27,7 @@ def sim(args: argparse.Namespace) -> int:
     """``visloc sim SCENARIO``: fly a scenario (:data:`visloc.sim.SCENARIOS`) in closed loop;
     print the metrics (or ``--json``), optionally write ``--out`` CSV, ``--plot`` PNG and
     ``--rerun`` recording. Exit 0 when the run settled or completed, 1 when it crashed or
-    diverged."""
+    diverged, 130 when Ctrl-C stopped it (the outputs then cover the steps flown so far)."""
     from visloc.sim import SimStatus, get_scenario, simulate
     from visloc.sim.output import save_plot, save_rerun, write_csv
 
@@ -72,4 +72,7 @@ def sim(args: argparse.Namespace) -> int:
             print(f"  {label:<42} {text} {unit}".rstrip())
         for path in written:
             print(f"wrote {path}")
+    if result.status is SimStatus.INTERRUPTED:
+        print("visloc: interrupted; results written so far are kept", file=sys.stderr)
+        return 130
     return 0 if result.status in (SimStatus.SETTLED, SimStatus.COMPLETED) else 1

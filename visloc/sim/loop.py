@@ -63,6 +63,8 @@ class SimStatus(str, Enum):
     """Hit the floor or tipped over."""
     DIVERGED = "diverged"
     """The state blew up, drifted away, or the estimator lost track."""
+    INTERRUPTED = "interrupted"
+    """Stopped by Ctrl-C (``KeyboardInterrupt``): the steps flown so far are kept."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -235,60 +237,68 @@ def simulate(
     status, reason = None, ""
     wall = time.perf_counter()
     k = 0
-    for k in range(n):
-        t = k * ctrl_dt
-        s = vehicle.state
-        force = sc.force(t)
-        if sc.gust_std > 0.0:
-            gust = gust_a * gust + math.sqrt(1 - gust_a**2) * sc.gust_std * rng.normal(size=3)
-            gust[2] = 0.0
-            force = gust if force is None else force + gust
-        R = vehicle.rotation()
-        if isinstance(estimator, VisionEstimator):
-            gyro, accel = imu.sample(s, R, vehicle.acceleration(force), p.g)
-            estimator.imu(t, gyro, accel)
-            if t + 1e-9 >= next_echo:  # report §3.2.1: the ultrasound at 25 Hz
-                estimator.ultrasound(t, sonar.sample(s, R))
-                next_echo += ULTRASOUND_PERIOD
-            if t + 1e-9 >= next_frame:
-                try:
-                    image = camera.capture(s, R)  # type: ignore[union-attr]
-                except ValueError as exc:  # the view left the printed floor
-                    status, reason = SimStatus.DIVERGED, f"vision lost at t = {t:.2f} s: {exc}"
-                else:
-                    estimator.image(t, image, cam_dt)
-                    frames += 1
-                next_frame += cam_dt
-            if status is None and t - estimator.last_fix_time > VISION_TIMEOUT:
-                status, reason = SimStatus.DIVERGED, (
-                    f"vision lost: no marker-map fix for {VISION_TIMEOUT:g} s at t = {t:.2f} s")
-        else:
-            estimator.observe(s)
-        sp = sc.setpoint(t)
-        x_hat = estimator.state
-        cmd = controller.pwm(x_hat, sp, ctrl_dt)  # report eqs. (4.5)-(4.6)
-        states[k], estimates[k], setpoints[k], pwms[k] = s, x_hat, sp, cmd.pwm
-        saturated[k] = cmd.saturated
-        if status is not None:
-            break
-        if s[2] > -p.cog_height:
-            status, reason = SimStatus.CRASHED, f"hit the floor at t = {t:.2f} s"
-        elif max(abs(s[6]), abs(s[7])) > CRASH_TILT:
-            status, reason = SimStatus.CRASHED, (
-                f"tipped over at t = {t:.2f} s (roll {math.degrees(s[6]):.0f} deg, "
-                f"pitch {math.degrees(s[7]):.0f} deg)")
-        elif np.linalg.norm(s[:3] - sp[:3]) > FAR:
-            status, reason = SimStatus.DIVERGED, f"drifted {FAR:g} m from the set point at t = {t:.2f} s"
-        if status is not None or k == n - 1:
-            break
-        try:
-            for _ in range(substeps):
-                vehicle.step(cmd.pwm, h, force)
-        except FloatingPointError as exc:
-            status, reason = SimStatus.DIVERGED, str(exc)
-            break
-        if progress is not None and int((k + 1) * ctrl_dt) != int(k * ctrl_dt):
-            progress((k + 1) * ctrl_dt)
+    done = 0  # steps whose records are complete
+    try:
+        for k in range(n):
+            t = k * ctrl_dt
+            s = vehicle.state
+            force = sc.force(t)
+            if sc.gust_std > 0.0:
+                gust = gust_a * gust + math.sqrt(1 - gust_a**2) * sc.gust_std * rng.normal(size=3)
+                gust[2] = 0.0
+                force = gust if force is None else force + gust
+            R = vehicle.rotation()
+            if isinstance(estimator, VisionEstimator):
+                gyro, accel = imu.sample(s, R, vehicle.acceleration(force), p.g)
+                estimator.imu(t, gyro, accel)
+                if t + 1e-9 >= next_echo:  # report §3.2.1: the ultrasound at 25 Hz
+                    estimator.ultrasound(t, sonar.sample(s, R))
+                    next_echo += ULTRASOUND_PERIOD
+                if t + 1e-9 >= next_frame:
+                    try:
+                        image = camera.capture(s, R)  # type: ignore[union-attr]
+                    except ValueError as exc:  # the view left the printed floor
+                        status, reason = SimStatus.DIVERGED, f"vision lost at t = {t:.2f} s: {exc}"
+                    else:
+                        estimator.image(t, image, cam_dt)
+                        frames += 1
+                    next_frame += cam_dt
+                if status is None and t - estimator.last_fix_time > VISION_TIMEOUT:
+                    status, reason = SimStatus.DIVERGED, (
+                        f"vision lost: no marker-map fix for {VISION_TIMEOUT:g} s at t = {t:.2f} s")
+            else:
+                estimator.observe(s)
+            sp = sc.setpoint(t)
+            x_hat = estimator.state
+            cmd = controller.pwm(x_hat, sp, ctrl_dt)  # report eqs. (4.5)-(4.6)
+            states[k], estimates[k], setpoints[k], pwms[k] = s, x_hat, sp, cmd.pwm
+            saturated[k] = cmd.saturated
+            done = k + 1
+            if status is not None:
+                break
+            if s[2] > -p.cog_height:
+                status, reason = SimStatus.CRASHED, f"hit the floor at t = {t:.2f} s"
+            elif max(abs(s[6]), abs(s[7])) > CRASH_TILT:
+                status, reason = SimStatus.CRASHED, (
+                    f"tipped over at t = {t:.2f} s (roll {math.degrees(s[6]):.0f} deg, "
+                    f"pitch {math.degrees(s[7]):.0f} deg)")
+            elif np.linalg.norm(s[:3] - sp[:3]) > FAR:
+                status, reason = SimStatus.DIVERGED, f"drifted {FAR:g} m from the set point at t = {t:.2f} s"
+            if status is not None or k == n - 1:
+                break
+            try:
+                for _ in range(substeps):
+                    vehicle.step(cmd.pwm, h, force)
+            except FloatingPointError as exc:
+                status, reason = SimStatus.DIVERGED, str(exc)
+                break
+            if progress is not None and int((k + 1) * ctrl_dt) != int(k * ctrl_dt):
+                progress((k + 1) * ctrl_dt)
+    except KeyboardInterrupt:  # Ctrl-C: keep the steps flown so far
+        if done == 0:
+            raise
+        status, reason = SimStatus.INTERRUPTED, f"interrupted at t = {done * ctrl_dt:.2f} s"
+        k = done - 1
     wall = time.perf_counter() - wall
     m = k + 1
     t_out, states, estimates = t_out[:m], states[:m], estimates[:m]

@@ -102,7 +102,9 @@ def render_dataset(
     camera : bool
         Camera-like frames (``True``) or linear renders.
     progress : callable or None
-        Called as ``progress(i)`` after frame ``i`` is written.
+        Called as ``progress(i)`` after frame ``i`` is written. An exception it raises (or a
+        Ctrl-C) stops the run; ``ground_truth.json`` and ``camera.yml`` then cover the frames
+        written so far.
 
     Returns
     -------
@@ -123,22 +125,25 @@ def render_dataset(
     out.mkdir(parents=True, exist_ok=True)
     K = default_camera((w, h))
     gt = _header(dic, (w, h), K, MARKER_LENGTH) | {"difficulty": difficulty, "seed": seed}
-    frames = []
-    for i in range(n):
-        render = random_scene(np.random.default_rng([seed, i]), size=(w, h), dictionary=dic,
-                              difficulty=difficulty, camera=camera, lens=DATASET_LENS if camera else None)
-        name = f"frame_{i:04d}.png"
-        if not cv2.imwrite(str(out / name), render.image):
-            raise OSError(f"could not write {out / name}")
-        frames.append(_frame_record(name, render))
-        if progress is not None:
-            progress(i)
-    gt["frames"] = frames
+    frames: list[dict] = []
     dist = np.array([*DATASET_LENS, 0.0, 0.0, 0.0]) if camera else np.zeros(5)
     gt["camera"]["dist"] = dist.tolist()
     gt["camera_like"] = bool(camera)
-    (out / "ground_truth.json").write_text(json.dumps(gt, indent=1))
-    write_camera_yml(out / "camera.yml", K, (w, h), dist)
+    try:
+        for i in range(n):
+            render = random_scene(np.random.default_rng([seed, i]), size=(w, h), dictionary=dic,
+                                  difficulty=difficulty, camera=camera, lens=DATASET_LENS if camera else None)
+            name = f"frame_{i:04d}.png"
+            if not cv2.imwrite(str(out / name), render.image):
+                raise OSError(f"could not write {out / name}")
+            frames.append(_frame_record(name, render))
+            if progress is not None:
+                progress(i)
+    finally:  # interrupted or failed: the frames written so far keep their ground truth
+        if frames:
+            gt["frames"] = frames
+            (out / "ground_truth.json").write_text(json.dumps(gt, indent=1))
+            write_camera_yml(out / "camera.yml", K, (w, h), dist)
     return out
 
 
@@ -193,7 +198,9 @@ def render_video(
     ground_truth : str, Path or None
         Where to write the ground truth; default ``ground_truth.json`` beside the video.
     progress : callable or None
-        Called as ``progress(i)`` after frame ``i`` is written.
+        Called as ``progress(i)`` after frame ``i`` is written. An exception it raises (or a
+        Ctrl-C) stops the run; ``ground_truth.json`` and ``camera.yml`` then cover the frames
+        written so far.
 
     Returns
     -------

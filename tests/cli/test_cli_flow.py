@@ -85,3 +85,16 @@ def test_flow_configuration_errors(flight, tmp_path, capsys, extra, word):
         code = exc.code
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and word in err
+
+
+def test_a_frame_without_a_height_is_recorded_and_the_run_goes_on(flight, tmp_path, capsys):
+    lines = (flight / "heights.csv").read_text().splitlines()
+    (tmp_path / "heights.csv").write_text("\n".join([lines[0], *lines[1:4], *lines[5:]]) + "\n")  # no frame 3
+    out = tmp_path / "v.csv"
+    code = main(["flow", str(flight), "--camera", str(flight / "camera.yml"), "--height-csv",
+                 str(tmp_path / "heights.csv"), "--fps", "60", "--out", str(out), "--quiet"])
+    rows = _rows(out)
+    assert code == 1 and len(rows) == len(_truth(flight))
+    assert "no height for frame 3" in rows[3]["reason"] and float(rows[3]["quality"]) == 0
+    assert rows[4]["vx"] != "" and float(rows[4]["quality"]) > 0.3  # the next frame is measured again
+    assert "no height for frame 3" in capsys.readouterr().err

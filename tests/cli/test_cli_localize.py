@@ -94,3 +94,21 @@ def test_localize_reads_the_maps_dictionary_and_refuses_another(tmp_path, capsys
     assert main([*base, "--dict", "DICT_4X4_50"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "DICT_4X4_100" in err
+
+
+def test_imu_rows_skipped_or_out_of_time_are_said(tmp_path, capsys):
+    src = tmp_path / "flight"
+    assert main(["render", "localize", str(src), "--seconds", "0.3", "--fps", "30", "--seed", "6"]) == 0
+    lines = (src / "imu.csv").read_text().splitlines()
+    bad = tmp_path / "imu_bad.csv"
+    bad.write_text("\n".join([lines[0], lines[1], "0.0021,x,0,0,nan,0,9.8", *lines[3:]]) + "\n")
+    late = tmp_path / "imu_late.csv"
+    late.write_text("\n".join([lines[0]] + [",".join([str(100 + float(r.split(",")[0]))] + r.split(",")[1:])
+                                            for r in lines[1:]]) + "\n")
+    base = ["localize", str(src), "--camera", str(src / "camera.yml"), "--map", str(src / "map.yml"), "--fps", "30",
+            "--quiet"]
+    capsys.readouterr()
+    assert main([*base, "--imu", str(bad)]) == 0
+    assert "1 rows without finite numbers skipped (lines 3)" in capsys.readouterr().err
+    assert main([*base, "--imu", str(late)]) == 0
+    assert "do not overlap" in capsys.readouterr().err

@@ -246,3 +246,33 @@ def test_an_image_too_small_to_use_is_an_unreadable_frame_and_the_folder_goes_on
     frames = list(open_source(str(tmp_path)))
     assert frames[0].image is None and "at least 2 x 2" in frames[0].error
     assert frames[1].image is not None
+
+
+@pytest.mark.parametrize("ext, fourcc", [(".avi", "MJPG"), (".mp4", "mp4v")])
+def test_a_video_with_corrupt_bytes_is_read_past_them_and_says_so(tmp_path: Path, ext: str, fourcc: str) -> None:
+    path = tmp_path / f"v{ext}"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*fourcc), 30, (160, 120))
+    for i in range(100):
+        img = np.full((120, 160, 3), (2 * i) % 255, np.uint8)
+        cv2.putText(img, str(i), (20, 60), 0, 1, (255, 255, 255), 2)
+        writer.write(img)
+    writer.release()
+    clean = list(open_source(path))
+    assert len(clean) == 100 and all(f.error is None for f in clean)
+    data = bytearray(path.read_bytes())
+    data[len(data) // 2 : len(data) // 2 + 3000] = bytes(3000)  # zeros in the middle of the stream
+    bad = tmp_path / f"bad{ext}"
+    bad.write_bytes(bytes(data))
+    frames = list(open_source(bad))
+    good = [f for f in frames if f.image is not None]
+    assert len(good) > 60  # frames after the damage are read too (it used to stop there)
+    assert frames[-1].image is None and "of 100 the container declares" in frames[-1].error
+    truncated = tmp_path / f"cut{ext}"
+    truncated.write_bytes(path.read_bytes()[: len(data) * 2 // 3])
+    if ext == ".mp4":  # its index is at the end: a cut file cannot be opened, and says so
+        with pytest.raises(SourceError, match="cannot open video"):
+            open_source(truncated)
+        return
+    cut = list(open_source(truncated))
+    assert 0 < len(cut) - 1 < 100 and cut[-1].image is None
+    assert "of 100 the container declares" in cut[-1].error and "ends early" in cut[-1].error

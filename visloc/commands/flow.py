@@ -79,8 +79,13 @@ def flow(args: argparse.Namespace) -> int:
             height = args.height
             if heights is not None:
                 height = heights.get(frame.index)
-                if height is None:
-                    raise UsageError(f"--height-csv has no height for frame {frame.index}")
+                if height is None:  # this frame is skipped, the run goes on
+                    failed += 1
+                    reason = f"--height-csv has no height for frame {frame.index}"
+                    warn("flow", reason)
+                    if out:
+                        out.write(row | {"quality": 0.0, "reason": reason})
+                    continue
             cam = camera_for(camera, frame.image.shape, warned, "flow")
             if ego is None or ego.frame_shape != frame.image.shape[:2]:
                 if ego is not None:
@@ -110,5 +115,5 @@ def flow(args: argparse.Namespace) -> int:
     if not args.quiet:
         ms = f", median {1e3 * float(np.median(times)):.2f} ms per pair" if times else ""
         q = f", median quality {float(np.median(qualities)):.2f}" if qualities else ""
-        print(f"visloc flow: {n_frames} frames, {failed} unreadable{ms}{q}", file=sys.stderr)
+        print(f"visloc flow: {n_frames} frames, {failed} unreadable or without a height{ms}{q}", file=sys.stderr)
     return 1 if failed else 0

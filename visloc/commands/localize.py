@@ -58,7 +58,12 @@ def _read_imu(path: str) -> np.ndarray:
     columns ``t,gx,gy,gz,fx,fy,fz`` (as ``visloc render localize`` writes), sorted by time."""
     cols = read_columns(path, "--imu", ("t", "fx", "fy", "fz"))
     imu = np.column_stack([cols[k] for k in ("t", "fx", "fy", "fz")])
-    imu = imu[np.isfinite(imu).all(axis=1)]
+    good = np.isfinite(imu).all(axis=1)
+    if not good.all():  # NaN, inf or text (read as NaN): said, not silently dropped
+        bad = np.flatnonzero(~good) + 2  # file line numbers (the header is line 1)
+        shown = ", ".join(map(str, bad[:5])) + (" ..." if len(bad) > 5 else "")
+        warn("localize", f"--imu {path}: {len(bad)} rows without finite numbers skipped (lines {shown})")
+    imu = imu[good]
     if len(imu) == 0 or (np.diff(imu[:, 0]) <= 0).any():
         raise UsageError(f"--imu {path}: times must be finite and increasing")
     return imu
@@ -81,7 +86,8 @@ def localize(args: argparse.Namespace) -> int:
     gravity = np.array([0.0, 0.0, -9.81])  # the map's z axis points up, out of the markers
     R_map_cam = None
     last_t = None
-    failed = n_frames = fixes = 0
+    failed = n_frames = fixes = imu_used = 0
+    frame_times: list[float] = []
     errors: list[float] = []
     with ExitStack() as stack:
         source = open_timed_source(stack, args)
@@ -105,8 +111,10 @@ def localize(args: argparse.Namespace) -> int:
                 sel = (imu[:, 0] > last_t) & (imu[:, 0] <= frame.time)
                 if sel.any():
                     accel = R_map_cam @ imu[sel, 1:].mean(axis=0) + gravity
+                    imu_used += 1
             kf.predict(frame.time, accel=accel)
             last_t = frame.time
+            frame_times.append(frame.time)
             if mp is not None:
                 R_map_cam = mp.R_map_cam
             fix = "none"
@@ -130,9 +138,15 @@ def localize(args: argparse.Namespace) -> int:
                 out.write(row)
             if rec:
                 rec.log_localize(frame.index, frame.time, frame.image, pos, true_pos)
+    if imu is not None and len(frame_times) > 1 and imu_used == 0:
+        warn("localize", f"--imu {args.imu}: its times {imu[0, 0]:g} .. {imu[-1, 0]:g} s do not overlap the frames' "
+                         f"{frame_times[0]:g} .. {frame_times[-1]:g} s (or no frame had a fix to turn it into the "
+                         "map frame): the IMU was not used")
     if not args.quiet:
         err = f", median position error {1e3 * float(np.median(errors)):.1f} mm" if errors else ""
-        print(f"visloc localize: {n_frames} frames, {fixes} position fixes, {failed} unreadable{err}", file=sys.stderr)
+        used = f", IMU between {imu_used} frame pairs" if imu is not None else ""
+        print(f"visloc localize: {n_frames} frames, {fixes} position fixes, {failed} unreadable{used}{err}",
+              file=sys.stderr)
     return 1 if failed else 0
 
 def track(args: argparse.Namespace) -> int:

@@ -217,14 +217,21 @@ class ImageListSource(FrameSource):
             yield Frame(index, t, image, path, error)
 
 
+#: failed reads in a row after which a video is taken to have ended
+MAX_BAD_READS = 32
+
+
 class VideoSource(FrameSource):
     """Frames of a video file read with ``cv2.VideoCapture``.
 
     ``time`` is the stream timestamp (``CAP_PROP_POS_MSEC`` after each read) in seconds. If
     ``fps`` is given it overrides the container and ``time = index / fps``; if the backend
-    reports no usable timestamps, ``index / CAP_PROP_FPS`` is used. Iteration stops at the first
-    frame the decoder cannot deliver (end of stream or a corrupt tail). Each new iteration
-    starts again from the first frame.
+    reports no usable timestamps, ``index / CAP_PROP_FPS`` is used. A frame the decoder cannot
+    deliver (corrupt bytes) is skipped and reading goes on; the stream ends after
+    :data:`MAX_BAD_READS` failed reads in a row. When frames were lost, or fewer arrived than the
+    container declares (a truncated file), a last frame without an image says so in its
+    ``error`` (the commands count and report it). Each new iteration starts again from the
+    first frame.
 
     Parameters
     ----------
@@ -270,13 +277,18 @@ class VideoSource(FrameSource):
             self._capture = self._open()
         self._fresh = False
         capture = self._capture
-        index = 0
+        index = lost = bad = 0
         last_time = -math.inf
         use_stamps = self.fps is None
         while not self._closed:
             ok, image = capture.read()
             if not ok or image is None:
-                return
+                bad += 1
+                if bad >= MAX_BAD_READS:
+                    break
+                continue
+            lost += bad  # failed reads followed by a good frame: corrupt frames skipped
+            bad = 0
             stamp = capture.get(cv2.CAP_PROP_POS_MSEC) / 1000.0
             if use_stamps and (not math.isfinite(stamp) or stamp < 0 or stamp <= last_time):
                 use_stamps = False  # backend without usable timestamps: fall back to index / fps
@@ -288,6 +300,14 @@ class VideoSource(FrameSource):
             last_time = t
             yield Frame(index, t, _to_uint8(image), f"{self.path}#{index}")
             index += 1
+        if self._closed:
+            return
+        short = self.frame_count is not None and index < self.frame_count
+        if lost or short:
+            declared = f" of {self.frame_count} the container declares" if self.frame_count else ""
+            yield Frame(index, max(last_time, 0.0), None, f"{self.path}#end",
+                        f"video {self.path}: {index} frames read{declared}; {lost} corrupt frames skipped"
+                        + ("; the file ends early" if short and index + lost < self.frame_count else ""))
 
     def close(self) -> None:
         """Release the capture."""

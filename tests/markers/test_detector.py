@@ -350,3 +350,24 @@ def test_deeper_pixel_types_are_read_as_their_uint8_equivalent(detector):
         assert all(np.abs(a.corners - b.corners).max() < 0.05 for a, b in zip(dets, base, strict=True))
     with pytest.raises(TypeError, match="uint8"):
         detector.detect(image.astype(np.int32))
+
+
+def test_the_python_stages_give_the_compiled_detections():
+    from visloc.markers.bits import NATIVE_CELLS
+    from visloc.markers.contours import NATIVE_BORDERS
+    from visloc.markers.corners_batch import NATIVE_QUADS
+    from visloc.markers.refine import NATIVE_REFINE
+
+    python = MarkerDetector("DICT_4X4_50", native=False)
+    assert python.detect(random_scene(11, size=(320, 240), difficulty="easy", camera=True).image)
+    if not (NATIVE_BORDERS and NATIVE_QUADS and NATIVE_REFINE and NATIVE_CELLS):
+        pytest.skip("the compiled stages were not built (no C compiler at install)")
+    compiled = MarkerDetector("DICT_4X4_50", native=True)
+    for seed, difficulty in ((11, "easy"), (12, "hard"), (13, "small")):
+        image = random_scene(seed, size=(320, 240), difficulty=difficulty, camera=True).image
+        a, b = compiled.detect(image), python.detect(image)
+        assert [d.id for d in a] == [d.id for d in b]
+        # stage 8 interpolates in double precision compiled, through cv2.remap in numpy
+        assert all(np.abs(x.corners - y.corners).max() < 0.05 for x, y in zip(a, b, strict=True))
+    with pytest.raises(ValueError, match="native"):
+        MarkerDetector("DICT_4X4_50", native="yes")

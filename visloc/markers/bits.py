@@ -236,7 +236,7 @@ def _area_grid(n: int, per_side: int, margin: float) -> NDArray[np.float64]:
 
 
 def cell_white_fractions(gray: NDArray[np.uint8], quads: NDArray, n: int, threshold: NDArray, *,
-                         per_side: int = 8, margin: float = 0.13) -> NDArray[np.float64]:
+                         per_side: int = 8, margin: float = 0.13, native: bool | None = None) -> NDArray[np.float64]:
     """Fraction of each cell's read area brighter than the marker's threshold, as OpenCV
     reads cells (the share of white pixels of each cell of the marker warped square, a
     ``margin`` of the cell left out on every side).
@@ -255,6 +255,8 @@ def cell_white_fractions(gray: NDArray[np.uint8], quads: NDArray, n: int, thresh
     margin : float
         Fraction of the cell left out on each side, in [0, 0.5) (OpenCV's
         ``perspectiveRemoveIgnoredMarginPerCell``, 0.13).
+    native : bool or None
+        As for :func:`sample_quads`.
 
     Returns
     -------
@@ -263,7 +265,8 @@ def cell_white_fractions(gray: NDArray[np.uint8], quads: NDArray, n: int, thresh
     q = np.asarray(quads, np.float64).reshape(-1, 4, 2)
     if len(q) == 0:
         return np.zeros((0, n, n))
-    vals = sample_quads(gray, q, _area_grid(n, per_side, float(margin))).reshape(len(q), n, per_side, n, per_side)
+    vals = sample_quads(gray, q, _area_grid(n, per_side, float(margin)), native=native)
+    vals = vals.reshape(len(q), n, per_side, n, per_side)
     white = vals > np.asarray(threshold, np.float64).reshape(-1, 1, 1, 1, 1)
     return white.mean(axis=(2, 4))
 

@@ -32,9 +32,13 @@ from visloc._compiled import use_compiled
 _NEXT = np.array([1, 2, 3, 0])
 
 try:
-    from visloc.markers import _borders, _filter
+    from visloc.markers import _borders
 except ImportError:  # the package was installed without a C compiler: OpenCV's follower
-    _borders = _filter = None
+    _borders = None
+try:
+    from visloc.markers import _filter
+except ImportError:  # (each module on its own: one that failed to build leaves the others)
+    _filter = None
 
 #: Whether :func:`enclosing_borders` and :func:`filter_candidates` run compiled code.
 NATIVE_BORDERS = _borders is not None and _filter is not None
@@ -248,7 +252,7 @@ def find_candidates(binary: NDArray[np.uint8], params: CandidateFilter = Candida
     lo, hi = perimeter_bounds(binary.shape, params)
     if not (use_compiled(native, _borders, "visloc.markers._borders")
             and use_compiled(native, _filter, "visloc.markers._filter")):
-        return filter_candidates(enclosing_borders(binary, lo, hi, native=False), binary.shape, params, native=False)
+        return filter_candidates(enclosing_borders(binary, lo, hi, native=native), binary.shape, params, native=native)
     if binary.ndim != 2 or binary.dtype != np.uint8:
         raise ValueError(f"binary must be a (H, W) uint8 image, got {binary.shape} {binary.dtype}")
     b = np.ascontiguousarray(binary)

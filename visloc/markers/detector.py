@@ -177,6 +177,10 @@ class DetectorParams:
         OpenCV and stage 9 read cleanly was lost to the area check.
     error_correction_rate : float
         Stage 10: fraction of the dictionary's correction capacity used (OpenCV: 0.6).
+    native : bool or None
+        Run the compiled stages (4-9: ``True``; a ``RuntimeError`` when they were not built),
+        their Python versions (``False``: the same detections, stage 8's corners within about
+        0.01 px, slower), or the compiled ones where they were built (``None``, the default).
     """
 
     passes: tuple[SearchPass, ...] = (SearchPass(1.0, 9), SearchPass(1.5, 11), SearchPass(4.0, 9))
@@ -205,6 +209,7 @@ class DetectorParams:
     cell_margin: float = 0.13
     bit_threshold: float | None = None
     error_correction_rate: float = 0.6
+    native: bool | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -343,6 +348,8 @@ class MarkerDetector:
         bb = self.params.border_bits
         if isinstance(bb, bool) or not isinstance(bb, (int, np.integer)) or not 1 <= bb <= 3:
             raise ValueError(f"border_bits must be 1, 2 or 3, got {bb!r}")
+        if self.params.native is not None and not isinstance(self.params.native, bool):
+            raise ValueError(f"native must be True, False or None, got {self.params.native!r}")
         if self.params.inverted not in (False, True, "both") or not isinstance(self.params.inverted, (bool, str)):
             raise ValueError(f"inverted must be False, True or 'both', got {self.params.inverted!r}")
         # each id's cells (1 = white) with its border, as seen at 0-3 quarter turns (decode's r)
@@ -373,7 +380,7 @@ class MarkerDetector:
             work = cv2.resize(gray, size, interpolation=cv2.INTER_AREA if whole else cv2.INTER_LINEAR)
         return work, np.array([gray.shape[1] / work.shape[1], gray.shape[0] / work.shape[0]])
 
-    def _search(self, gray: NDArray[np.uint8], sp: SearchPass, base: float) -> _PassImage:
+    def _search(self, gray: NDArray[np.uint8], sp: SearchPass, base: float, look: bool = True) -> _PassImage:
         """Stages 2-5 of one search pass. Touches nothing shared, so the passes after the
         first run on a worker thread while the first goes on (the compiled stages 4 and 5 and
         OpenCV's filters release the GIL; the Python of stages 6-7 stays on the main thread:
@@ -392,25 +399,30 @@ class MarkerDetector:
         # stage 4: a marker's frame encloses its white cells, so ink without a hole is no marker;
         # stage 5 on those borders
         return self._look(gray, _PassImage(work.shape, scale, window, candidates, blurred, binary,
-                                           find_candidates(binary, candidates)))
+                                           find_candidates(binary, candidates, native=p.native)), look)
 
-    def _look(self, gray: NDArray[np.uint8], search: _PassImage) -> _PassImage:
-        """A cheap, lenient look at the cells of a pass's candidates through their polygon
-        corners: most texture candidates (and the black cells inside markers) end there,
-        before they cost a corner fit and an edge refinement: no black border, no contrast, or
-        too few or too many white bits for any marker of the dictionary. Compiled, it
-        releases the GIL, so the later passes look on the worker thread."""
+    def _look(self, gray: NDArray[np.uint8], search: _PassImage, look: bool = True) -> _PassImage:
+        """The polygon corners of a pass's candidates in full-resolution pixels, and (``look``)
+        :meth:`_looks_right` for all of them: compiled, it releases the GIL, so the later
+        passes look on the worker thread (without it, only the candidates no earlier pass
+        proposed are looked at, in :meth:`_propose`)."""
         k = len(search.found)
         if not k:
             return replace(search, approx=np.zeros((0, 4, 2)), looks=np.zeros(0, bool))
         approx = _clockwise(np.array([q for _, q in search.found], np.float64).reshape(k, 4, 2))
         approx = (approx + 0.5) * search.scale - 0.5  # polygon corners in full-resolution pixels
+        return replace(search, approx=approx, looks=self._looks_right(gray, approx) if look else None)
+
+    def _looks_right(self, gray: NDArray[np.uint8], approx: NDArray) -> NDArray[np.bool_]:
+        """A cheap, lenient look at the cells of candidates (K, 4, 2) through their polygon
+        corners: most texture candidates (and the black cells inside markers) end there,
+        before they cost a corner fit and an edge refinement: no black border, no contrast, or
+        too few or too many white bits for any marker of the dictionary."""
         bb = self.params.border_bits
         valid, bits = read_cells(gray, approx, self.dictionary.marker_size + 2 * bb, border_error_rate=0.5,
-                                 border=bb)[1][:2]
-        white = bits.reshape(k, -1).sum(axis=1)
-        looks = valid & (white >= self._white_range[0]) & (white <= self._white_range[1])
-        return replace(search, approx=approx, looks=looks)
+                                 border=bb, native=self.params.native)[1][:2]
+        white = bits.reshape(len(bits), -1).sum(axis=1)
+        return valid & (white >= self._white_range[0]) & (white <= self._white_range[1])
 
     def _area_check(self, gray: NDArray[np.uint8], corners: NDArray, thr: NDArray, ids: NDArray,
                     shift: NDArray) -> tuple[NDArray, NDArray[np.bool_]]:
@@ -427,7 +439,7 @@ class MarkerDetector:
         n = self.dictionary.marker_size + 2 * bb
         cell_px = statistics.median(np.sqrt(np.abs(_areas(corners))).tolist()) / n  # np.median's value, cheaper
         per_side = int(np.clip(np.ceil(cell_px / 2), 4, 32))  # a sample per 2 px of cell, 4-32
-        white = cell_white_fractions(gray, corners, n, thr, per_side=per_side, margin=p.cell_margin)
+        white = cell_white_fractions(gray, corners, n, thr, per_side=per_side, margin=p.cell_margin, native=p.native)
         expected = self._cells_seen[ids, (4 - shift) % 4]  # decode: observed = rot90(true, (4 - shift) % 4)
         wrong = np.where(expected == 1, 1.0 - white, white)
         confidence = 1.0 - wrong.reshape(len(wrong), -1).mean(axis=1)
@@ -444,7 +456,9 @@ class MarkerDetector:
     def _eroded(self, gray: NDArray[np.uint8], found: _PassImage) -> _PassImage:
         """Stage 3b: stages 4-5 again on a pass's binary image with its ink eroded (``erode``)."""
         binary = cv2.erode(found.binary, np.ones((self.params.erode,) * 2, np.uint8))
-        return self._look(gray, replace(found, binary=binary, found=find_candidates(binary, found.candidates)))
+        return self._look(gray, replace(found, binary=binary,
+                                        found=find_candidates(binary, found.candidates, native=self.params.native)),
+                          look=False)
 
     def _passes(self, gray: NDArray[np.uint8], passes: list[SearchPass], base: float) -> Iterator[_PassImage]:
         """Stages 2-5 of the search passes in order, then (``erode``) stage 3b on the first
@@ -462,7 +476,7 @@ class MarkerDetector:
                 yield job.result()
             if not threaded:
                 for sp in rest:
-                    yield self._search(gray, sp, base)
+                    yield self._search(gray, sp, base, look=False)
             if self.params.erode:
                 yield self._eroded(gray, first)
         finally:
@@ -516,7 +530,8 @@ class MarkerDetector:
         contours = [c for s in group for c, _ in s.found]
         scale = np.array([s.scale for s in group])[pass_of][:, None, :]  # (K, 1, 2)
         approx = np.concatenate([s.approx for s in group])
-        looks = np.concatenate([s.looks for s in group])
+        looks = np.concatenate([s.looks if s.looks is not None else np.zeros(len(s.found), bool) for s in group])
+        unlooked = {k for k, s in enumerate(group) if s.looks is None}
         t = len(taken)
         same = _same(np.concatenate([taken, approx]))[t:]  # (K, t + K): rows the group's candidates
         done = np.ones(t, bool)  # the candidates fitted so far: the earlier ones, then this group's
@@ -527,13 +542,16 @@ class MarkerDetector:
                 continue
             sub = same[mine]
             fresh = mine[~(sub[:, done].any(axis=1) | np.tril(sub[:, t + mine], -1).any(axis=1))]
+            if k in unlooked and len(fresh):
+                looks[fresh] = self._looks_right(gray, approx[fresh])
             if log is not None:
                 for i in fresh[~looks[fresh]].tolist():
                     _note(log, contours[i], float(scale[i, 0, 0]), None, None, None, None, None, "bits")
             keep = fresh[looks[fresh]]
             hints = (approx[keep] + 0.5) / scale[keep] - 0.5
             quads, fitted, splits = fit_quads([contours[i] for i in keep], hints, sigma=p.corner_sigma,
-                                              padding=p.corner_padding, splits=log is not None)  # 6-7
+                                              padding=p.corner_padding, splits=log is not None,
+                                              native=p.native)  # 6-7
             full = (quads + 0.5) * scale[keep] - 0.5  # to full-resolution pixel centres
             for j, (i, ok) in enumerate(zip(keep.tolist(), fitted.tolist(), strict=True)):
                 if not ok:
@@ -569,10 +587,10 @@ class MarkerDetector:
             radii = p.refine_radius or np.clip(np.round(0.4 * side / n_cells), 1, p.refine_max_radius).astype(int)
             corners, refined = refine_quads(gray, quads, radius=radii, iterations=p.refine_iterations,
                                             count=p.refine_profiles, response=self._luts[inverted],
-                                            bend=p.bend)  # stages 8 and 8b
+                                            bend=p.bend, native=p.native)  # stages 8 and 8b
         cells, (valid, bits, margin, contrast, thr) = read_cells(  # stage 9, batched
             gray, corners, n_cells, per_side=4, border_error_rate=p.border_error_rate, border=bb,
-            min_quiet_zone=p.min_quiet_zone)
+            min_quiet_zone=p.min_quiet_zone, native=p.native)
         valid, bits, margin, contrast, thr = (np.array(a) for a in (valid, bits, margin, contrast, thr))
         ids, shift, hamming, matched = decode(bits, self.dictionary, p.error_correction_rate)  # 10
         # second reads of the candidates the first did not decode: with a threshold that
@@ -583,7 +601,8 @@ class MarkerDetector:
             retry = np.flatnonzero(~(valid & matched) & (refined if use_fit else True))
             if not len(retry):
                 continue
-            again = sample_cells(gray, quads[retry], n_cells, per_side=4) if use_fit else _take(cells, retry)
+            again = sample_cells(gray, quads[retry], n_cells, per_side=4, native=p.native) if use_fit else _take(
+                cells, retry)
             read = read_bits(again, p.border_error_rate, border=bb, min_quiet_zone=p.min_quiet_zone,
                              shading=shading)
             dec = decode(read.bits, self.dictionary, p.error_correction_rate)

@@ -17,12 +17,10 @@ from pathlib import Path
 from typing import NoReturn
 
 from visloc import __version__
+from visloc.errors import UsageError
 
 __all__ = ["UsageError", "build_parser", "check_outputs", "main"]
 
-
-class UsageError(ValueError):
-    """A problem with the command's arguments or configuration (exit status 2)."""
 
 
 def _positive(text: str) -> float:

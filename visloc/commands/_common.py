@@ -21,7 +21,7 @@ def dictionary_for(args: argparse.Namespace, command: str, *maps) -> str:
     """The dictionary of a command that reads marker maps: ``--dict`` when given (a map that
     records another one is a :class:`visloc.cli.UsageError`), else the one the maps record,
     else DICT_4X4_50 with a warning. Sets ``args.dict``."""
-    from visloc.cli import UsageError
+    from visloc.errors import UsageError
 
     recorded = {m.dictionary for m in maps if m.dictionary}
     if len(recorded) > 1:
@@ -89,7 +89,7 @@ def camera_for(camera: Camera, shape: tuple[int, ...], warned: list[bool], comma
 def open_timed_source(stack, args: argparse.Namespace):
     """Open ``args.source`` in ``stack`` for a command that needs real frame times (velocities):
     image folders and globs carry no times, so they need ``--fps``."""
-    from visloc.cli import UsageError
+    from visloc.errors import UsageError
     from visloc.io import ImageListSource, open_source
 
     source = stack.enter_context(open_source(args.source, fps=args.fps))
@@ -101,7 +101,7 @@ def open_timed_source(stack, args: argparse.Namespace):
 def read_columns(path: str, option: str, columns: tuple[str, ...]) -> dict[str, np.ndarray]:
     """The named ``columns`` of the CSV at ``path`` (header row required), as 1-d float arrays;
     a missing file or column is a :class:`visloc.cli.UsageError` naming ``option``."""
-    from visloc.cli import UsageError
+    from visloc.errors import UsageError
 
     try:
         data = np.genfromtxt(path, delimiter=",", names=True)

@@ -10,8 +10,8 @@ from contextlib import ExitStack
 import numpy as np
 from tqdm import tqdm
 
-from visloc.cli import UsageError
 from visloc.commands._common import camera_for, frames_of, open_timed_source, warn
+from visloc.errors import UsageError
 from visloc.io import RerunLogger
 from visloc.pose import Camera
 

@@ -9,7 +9,6 @@ from pathlib import Path
 
 import numpy as np
 
-from visloc.cli import UsageError
 from visloc.commands._common import (
     camera_for,
     detector_for,
@@ -19,6 +18,7 @@ from visloc.commands._common import (
     read_columns,
     warn,
 )
+from visloc.errors import UsageError
 from visloc.io import JsonlWriter, RerunLogger
 from visloc.pose import Camera
 

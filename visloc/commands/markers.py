@@ -11,7 +11,6 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from visloc.cli import UsageError
 from visloc.commands._common import (
     camera_for,
     detector_for,
@@ -22,6 +21,7 @@ from visloc.commands._common import (
 )
 from visloc.commands.flow import render_flow
 from visloc.commands.localize import render_localize
+from visloc.errors import UsageError
 from visloc.io import AnnotationSink, JsonlWriter, RerunLogger, draw_markers, open_source
 from visloc.pose import Camera, estimate_marker_pose
 

@@ -1,39 +1,19 @@
-"""Argument checks shared by the control modules (every message names the argument)."""
+"""Argument checks shared by the control modules (every message names the argument);
+:func:`visloc._checks.check_real` and :func:`visloc.model.params.check_params` re-exported."""
 
 from __future__ import annotations
-
-import math
-import numbers
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from visloc.model.params import ARDrone2Params
+from visloc._checks import check_real
+from visloc.model.params import ARDrone2Params, check_params
 from visloc.types import FloatArray
+
+__all__ = ["DEFAULT_ARM", "as_array", "check_params", "check_real", "resolve_arm"]
 
 DEFAULT_ARM = 0.125
 """Arm distance ``d`` of eq. (2.12) used when ``params.arm`` is unset, m (see :func:`resolve_arm`)."""
-
-
-def check_real(
-    value: object,
-    name: str,
-    *,
-    positive: bool = False,
-    nonneg: bool = False,
-    allow_inf: bool = False,
-) -> float:
-    """Return ``value`` as a finite float (or ``+inf`` if allowed) or raise naming it."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise TypeError(f"{name}: expected a real number, got {type(value).__name__}")
-    v = float(value)
-    if not (math.isfinite(v) or (allow_inf and v == math.inf)):
-        raise ValueError(f"{name}: expected a finite value, got {v!r}")
-    if positive and v <= 0.0:
-        raise ValueError(f"{name}: expected > 0, got {v!r}")
-    if nonneg and v < 0.0:
-        raise ValueError(f"{name}: expected >= 0, got {v!r}")
-    return v
 
 
 def as_array(value: ArrayLike, name: str, shape: tuple[int, ...]) -> FloatArray:
@@ -47,13 +27,6 @@ def as_array(value: ArrayLike, name: str, shape: tuple[int, ...]) -> FloatArray:
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name}: expected finite values, got {arr!r}")
     return arr
-
-
-def check_params(params: object, name: str = "params") -> ARDrone2Params:
-    """Raise ``TypeError`` unless ``params`` is an :class:`ARDrone2Params`; return it."""
-    if not isinstance(params, ARDrone2Params):
-        raise TypeError(f"{name}: expected ARDrone2Params, got {type(params).__name__}")
-    return params
 
 
 def resolve_arm(params: ARDrone2Params, arm: float | None = None) -> float:

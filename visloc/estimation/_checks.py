@@ -1,27 +1,16 @@
-"""Argument checks shared by the estimation modules (every message names the argument)."""
+"""Argument checks shared by the estimation modules (every message names the argument);
+:func:`visloc._checks.check_real` re-exported."""
 
 from __future__ import annotations
-
-import numbers
 
 import numpy as np
 from numpy.typing import NDArray
 
+from visloc._checks import check_real
+
 FloatArray = NDArray[np.float64]
 
-
-def check_real(value: object, name: str, *, positive: bool = False, nonneg: bool = False) -> float:
-    """Return ``value`` as a finite float or raise ``TypeError`` / ``ValueError`` naming ``name``."""
-    if not isinstance(value, numbers.Real) or isinstance(value, bool):
-        raise TypeError(f"{name} must be a real number, got {type(value).__name__}")
-    v = float(value)
-    if not np.isfinite(v):
-        raise ValueError(f"{name} must be finite, got {v}")
-    if positive and v <= 0.0:
-        raise ValueError(f"{name} must be > 0, got {v}")
-    if nonneg and v < 0.0:
-        raise ValueError(f"{name} must be >= 0, got {v}")
-    return v
+__all__ = ["FloatArray", "as_float_array", "check_dt", "check_dt_sequence", "check_real"]
 
 
 def check_dt(dt: object, name: str = "dt") -> float:

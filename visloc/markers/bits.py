@@ -11,11 +11,10 @@ together with a ring of cells sampled in the white margin around the marker, so 
 bits are mostly black still has a white class. A cell's bit is the majority of its samples
 (the fraction of white samples, as OpenCV counts the white pixels of each cell), so a stain,
 a reflection or a printing flaw over part of a cell does not flip it. All functions work on a
-batch of K candidates at once. The samples are read by bilinear interpolation in double
-precision (:func:`sample_quads`); compiled code (``visloc.markers._cells``, built with the
-package) samples and reads the cells of each candidate in one pass (:func:`read_cells`), with
-the numpy functions as the fallback: the same operations in the same order, the same samples
-and bits.
+batch of K candidates at once (one OpenCV remap per call). Compiled code
+(``visloc.markers._cells``, built with the package) reads the sampled cells into bits
+(:func:`read_cells`), with :func:`read_bits` as the fallback: the same operations in the same
+order, the same bits.
 """
 
 from __future__ import annotations
@@ -24,6 +23,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 from typing import NamedTuple
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -35,11 +35,11 @@ try:
 except ImportError:  # installed without a C compiler: the numpy versions
     _cells = None
 
-#: Whether :func:`sample_quads` and :func:`read_cells` run compiled code.
+#: Whether :func:`read_cells` runs compiled code.
 NATIVE_CELLS = _cells is not None
 
 __all__ = ["NATIVE_CELLS", "BitRead", "CellSample", "cell_white_fractions", "decode", "otsu_threshold", "read_bits",
-           "read_cells", "sample_cells", "sample_quads", "square_to_quad"]
+           "read_cells", "sample_cells", "square_to_quad"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -109,66 +109,10 @@ def _unit_grid(n: int, per_side: int) -> NDArray[np.float64]:
     return np.stack([x.ravel(), y.ravel()], axis=1) / n
 
 
-@lru_cache(maxsize=64)
-def _cell_grid(n: int, per_side: int) -> NDArray[np.float64]:
-    """:func:`_unit_grid` as a read-only C-contiguous array (the compiled reader's ``uv``)."""
-    uv = np.ascontiguousarray(_unit_grid(n, per_side))
-    uv.setflags(write=False)
-    return uv
+_GRIDS: dict[tuple[int, int], NDArray[np.float32]] = {}  # (3, P) points u, v, 1 per (n, per_side)
 
 
-def _quads_array(quads: NDArray) -> NDArray[np.float64]:
-    q = np.ascontiguousarray(np.asarray(quads, np.float64).reshape(-1, 4, 2))
-    if not np.isfinite(q).all():
-        raise ValueError("quads: every corner must be finite")
-    return q
-
-
-def sample_quads(gray: NDArray[np.uint8], quads: NDArray, uv: NDArray, *, native: bool | None = None) -> NDArray[np.uint8]:
-    """Grey levels at points ``uv`` (P, 2) of the unit square mapped onto each quad (K, 4, 2)
-    by :func:`square_to_quad`: bilinear interpolation, the image's edge pixels repeated beyond
-    it, rounded to whole grey levels. Returns (K, P) uint8.
-
-    ``native`` picks the compiled version (``True``) or numpy (``False``); ``None``: the
-    compiled one when it was built (:data:`NATIVE_CELLS`). Both compute the same values in the
-    same order and give the same samples.
-    """
-    g = np.ascontiguousarray(gray)
-    if g.ndim != 2 or g.dtype != np.uint8:
-        raise ValueError(f"gray must be a (H, W) uint8 image, got {g.shape} {g.dtype}")
-    q = _quads_array(quads)
-    uv = np.ascontiguousarray(uv, np.float64).reshape(-1, 2)
-    if use_compiled(native, _cells, "visloc.markers._cells"):
-        raw = _cells.sample_quads(g, g.shape[0], g.shape[1], q, uv)
-        return np.frombuffer(raw, np.uint8).reshape(len(q), len(uv))
-    return _sample_numpy(g, q, uv)
-
-
-def _sample_numpy(g: NDArray[np.uint8], q: NDArray, uv: NDArray) -> NDArray[np.uint8]:
-    """:func:`sample_quads` in numpy (the operations of ``_cells.c``, in its order)."""
-    H = square_to_quad(q)[:, :, :, None]  # (K, 3, 3, 1)
-    u, v = uv[:, 0], uv[:, 1]
-    xn = H[:, 0, 0] * u + H[:, 0, 1] * v + H[:, 0, 2]
-    yn = H[:, 1, 0] * u + H[:, 1, 1] * v + H[:, 1, 2]
-    wn = H[:, 2, 0] * u + H[:, 2, 1] * v + H[:, 2, 2]
-    h, w = g.shape
-    with np.errstate(divide="ignore", invalid="ignore"):
-        x, y = xn / wn, yn / wn
-    x = np.clip(np.nan_to_num(x, nan=-1.0, posinf=w, neginf=-1.0), -1.0, w)
-    y = np.clip(np.nan_to_num(y, nan=-1.0, posinf=h, neginf=-1.0), -1.0, h)
-    x0, y0 = np.floor(x), np.floor(y)
-    fx, fy = x - x0, y - y0
-    ix, iy = x0.astype(np.intp), y0.astype(np.intp)
-    xa, xb = np.clip(ix, 0, w - 1), np.clip(ix + 1, 0, w - 1)
-    ya, yb = np.clip(iy, 0, h - 1), np.clip(iy + 1, 0, h - 1)
-    f = g.astype(np.float64)
-    a, b, c, d = f[ya, xa], f[ya, xb], f[yb, xa], f[yb, xb]
-    val = (a * (1 - fx) + b * fx) * (1 - fy) + (c * (1 - fx) + d * fx) * fy
-    return np.floor(val + 0.5).astype(np.uint8)
-
-
-def sample_cells(gray: NDArray[np.uint8], quads: NDArray, n: int, *, per_side: int = 3,
-                 native: bool | None = None) -> CellSample:
+def sample_cells(gray: NDArray[np.uint8], quads: NDArray, n: int, *, per_side: int = 3) -> CellSample:
     """Grey levels of each of the ``n x n`` cells of each quad and of the ring around it.
 
     Parameters
@@ -177,21 +121,27 @@ def sample_cells(gray: NDArray[np.uint8], quads: NDArray, n: int, *, per_side: i
     quads : ndarray (K, 4, 2) or (4, 2)
         Corners clockwise in the image; corner 0 is the grid's top-left. The corners are the
         outer corners of the cell area (pixel-centre convention: a pixel's area is
-        ``[x - 0.5, x + 0.5]``).
+        ``[x - 0.5, x + 0.5]``). They must be finite.
     n : int
         Cells per side including the black border (bits per side + 2 x border cells).
     per_side : int
-        Samples across each cell (``per_side ** 2`` per cell, 0.2 cell apart), read by
-        :func:`sample_quads`.
-    native : bool or None
-        As for :func:`sample_quads`.
+        Samples across each cell (``per_side ** 2`` per cell, 0.2 cell apart), read by one
+        ``cv2.remap`` for all quads (bilinear, the image's edge pixels repeated beyond it).
     """
-    m = per_side * per_side
     q = np.asarray(quads, np.float64).reshape(-1, 4, 2)
+    m = per_side * per_side
     if len(q) == 0:
         return CellSample(np.zeros((0, n, n)), np.zeros((0, 4 * n + 4)), np.zeros((0, n, n, m), np.uint8))
-    raw = sample_quads(gray, q, _cell_grid(n, per_side), native=native).reshape(len(q), -1, m)
-    vals = raw.sum(axis=2, dtype=np.int64) / m
+    if not np.isfinite(q).all():
+        raise ValueError("quads: every corner must be finite")
+    if (n, per_side) not in _GRIDS:
+        uv = _unit_grid(n, per_side)
+        _GRIDS[n, per_side] = np.vstack([uv.T, np.ones(len(uv))]).astype(np.float32)
+    uv1 = _GRIDS[n, per_side]  # (3, P): u, v, 1
+    hom = (square_to_quad(q).reshape(-1, 3).astype(np.float32) @ uv1).reshape(len(q), 3, -1)  # (K, 3, S)
+    mx, my = hom[:, 0] / hom[:, 2], hom[:, 1] / hom[:, 2]
+    raw = cv2.remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).reshape(len(q), -1, m)
+    vals = raw.sum(axis=2, dtype=np.float64) / m
     samples = raw[:, : n * n].reshape(len(q), n, n, m)
     return CellSample(vals[:, : n * n].reshape(-1, n, n), vals[:, n * n :], samples)
 
@@ -199,44 +149,38 @@ def sample_cells(gray: NDArray[np.uint8], quads: NDArray, n: int, *, per_side: i
 def read_cells(gray: NDArray[np.uint8], quads: NDArray, n: int, *, per_side: int = 3, border_error_rate: float = 0.35,
                min_contrast: float = 10.0, border: int = 1, min_quiet_zone: float = 0.0,
                native: bool | None = None) -> tuple[CellSample, BitRead]:
-    """:func:`sample_cells` and :func:`read_bits` (one threshold per marker) in one call: the
-    detector's stage 9. The compiled version does both in one pass per candidate (``native``
-    as for :func:`sample_quads`; both give the same samples and bits)."""
-    q = _quads_array(quads)
-    m = per_side * per_side
-    if len(q) == 0 or not use_compiled(native, _cells, "visloc.markers._cells"):
-        cells = sample_cells(gray, q, n, per_side=per_side, native=native)
-        return cells, read_bits(cells, border_error_rate, min_contrast, border=border, min_quiet_zone=min_quiet_zone)
-    g = np.ascontiguousarray(gray)
-    if g.ndim != 2 or g.dtype != np.uint8:
-        raise ValueError(f"gray must be a (H, W) uint8 image, got {g.shape} {g.dtype}")
-    k, s = len(q), n - 2 * border
-    raw, cells, valid, bits, scal = _cells.read_cells(g, g.shape[0], g.shape[1], q, _cell_grid(n, per_side), n, m,
-                                                      border, float(border_error_rate), float(min_contrast),
-                                                      float(min_quiet_zone))
-    raw = np.frombuffer(raw, np.uint8).reshape(k, -1, m)
-    ring = raw[:, n * n :].sum(axis=2, dtype=np.int64) / m
+    """:func:`sample_cells` then :func:`read_bits` (one threshold per marker): the detector's
+    stage 9. The read is compiled (``visloc.markers._cells``: Otsu's threshold, the majority
+    read and the border checks for each candidate in one pass, the numpy version's operations
+    in its order: the same bits); ``native`` picks it (``True``), numpy (``False``) or the
+    compiled one when it was built (``None``, :data:`NATIVE_CELLS`)."""
+    sample = sample_cells(gray, quads, n, per_side=per_side)
+    k = len(sample.cells)
+    if k == 0 or not use_compiled(native, _cells, "visloc.markers._cells"):
+        return sample, read_bits(sample, border_error_rate, min_contrast, border=border, min_quiet_zone=min_quiet_zone)
+    s = n - 2 * border
+    valid, bits, scal = _cells.read_samples(np.ascontiguousarray(sample.samples), np.ascontiguousarray(sample.ring),
+                                            k, n, per_side * per_side, border, float(border_error_rate),
+                                            float(min_contrast), float(min_quiet_zone))
     margin, contrast, thr = np.frombuffer(scal, np.float64).reshape(3, k)
-    sample = CellSample(np.frombuffer(cells, np.float64).reshape(k, n, n), ring, raw[:, : n * n].reshape(k, n, n, m))
-    read = BitRead(np.frombuffer(valid, np.bool_), np.frombuffer(bits, np.uint8).reshape(k, s, s), margin, contrast,
-                   thr)
-    return sample, read
+    return sample, BitRead(np.frombuffer(valid, np.bool_), np.frombuffer(bits, np.uint8).reshape(k, s, s), margin,
+                           contrast, thr)
 
 
 @lru_cache(maxsize=64)
-def _area_grid(n: int, per_side: int, margin: float) -> NDArray[np.float64]:
-    """((n per_side)^2, 2) points u, v of :func:`cell_white_fractions` in the unit square,
+def _area_grid(n: int, per_side: int, margin: float) -> NDArray[np.float32]:
+    """(3, (n per_side)^2) points u, v, 1 of :func:`cell_white_fractions` in the unit square,
     row by row (read-only)."""
     sub = margin + (1 - 2 * margin) * (np.arange(per_side) + 0.5) / per_side
     cells = (np.arange(n)[:, None] + sub[None, :]).ravel() / n  # positions along one side
     u = np.broadcast_to(cells[None, :], (len(cells), len(cells)))
-    grid = np.ascontiguousarray(np.stack([u.ravel(), u.T.ravel()], axis=1))
+    grid = np.stack([u.ravel(), u.T.ravel(), np.ones(u.size)]).astype(np.float32)
     grid.setflags(write=False)
     return grid
 
 
 def cell_white_fractions(gray: NDArray[np.uint8], quads: NDArray, n: int, threshold: NDArray, *,
-                         per_side: int = 8, margin: float = 0.13, native: bool | None = None) -> NDArray[np.float64]:
+                         per_side: int = 8, margin: float = 0.13) -> NDArray[np.float64]:
     """Fraction of each cell's read area brighter than the marker's threshold, as OpenCV
     reads cells (the share of white pixels of each cell of the marker warped square, a
     ``margin`` of the cell left out on every side).
@@ -255,8 +199,6 @@ def cell_white_fractions(gray: NDArray[np.uint8], quads: NDArray, n: int, thresh
     margin : float
         Fraction of the cell left out on each side, in [0, 0.5) (OpenCV's
         ``perspectiveRemoveIgnoredMarginPerCell``, 0.13).
-    native : bool or None
-        As for :func:`sample_quads`.
 
     Returns
     -------
@@ -265,7 +207,14 @@ def cell_white_fractions(gray: NDArray[np.uint8], quads: NDArray, n: int, thresh
     q = np.asarray(quads, np.float64).reshape(-1, 4, 2)
     if len(q) == 0:
         return np.zeros((0, n, n))
-    vals = sample_quads(gray, q, _area_grid(n, per_side, float(margin)), native=native)
+    uv1 = _area_grid(n, per_side, float(margin))
+    hom = (square_to_quad(q).reshape(-1, 3).astype(np.float32) @ uv1).reshape(len(q), 3, -1)
+    side = n * per_side  # one map row per sample row, markers in chunks: OpenCV maps stay under 32767 px
+    mx = (hom[:, 0] / hom[:, 2]).reshape(-1, side)
+    my = (hom[:, 1] / hom[:, 2]).reshape(-1, side)
+    rows = (32000 // side) * side
+    vals = np.concatenate([cv2.remap(gray, mx[a : a + rows], my[a : a + rows], cv2.INTER_LINEAR,
+                                     borderMode=cv2.BORDER_REPLICATE) for a in range(0, len(mx), rows)])
     vals = vals.reshape(len(q), n, per_side, n, per_side)
     white = vals > np.asarray(threshold, np.float64).reshape(-1, 1, 1, 1, 1)
     return white.mean(axis=(2, 4))

@@ -265,8 +265,7 @@ class _PassImage:
     """Stages 2-5 of one search pass: the pass image's shape and scale to full resolution,
     its threshold window and candidate bounds, the blurred and binary images, and the
     candidates (outer borders that enclose a hole and pass stage 5, each with its polygon);
-    then the polygons' corners in full-resolution pixels (K, 4, 2) and whether the cells
-    through them look like a marker's (:meth:`MarkerDetector._look`)."""
+    then the polygons' corners in full-resolution pixels (K, 4, 2)."""
 
     shape: tuple[int, ...]
     scale: NDArray[np.float64]
@@ -276,7 +275,6 @@ class _PassImage:
     binary: NDArray[np.uint8]
     found: list[tuple[NDArray[np.int32], NDArray[np.int32]]]
     approx: NDArray[np.float64] | None = None
-    looks: NDArray[np.bool_] | None = None
 
 
 _POOL: tuple[int, ThreadPoolExecutor] | None = None
@@ -380,12 +378,14 @@ class MarkerDetector:
             work = cv2.resize(gray, size, interpolation=cv2.INTER_AREA if whole else cv2.INTER_LINEAR)
         return work, np.array([gray.shape[1] / work.shape[1], gray.shape[0] / work.shape[0]])
 
-    def _search(self, gray: NDArray[np.uint8], sp: SearchPass, base: float, look: bool = True) -> _PassImage:
+    def _search(self, gray: NDArray[np.uint8], sp: SearchPass, base: float) -> _PassImage:
         """Stages 2-5 of one search pass. Touches nothing shared, so the passes after the
         first run on a worker thread while the first goes on (the compiled stages 4 and 5 and
-        OpenCV's filters release the GIL; the Python of stages 6-7 stays on the main thread:
-        run on the worker, it waits for the GIL and slows the first pass down more than it
-        saves)."""
+        OpenCV's filters release the GIL). The first look at the cells and stages 6-7 stay
+        on the main thread, for the candidates no earlier pass proposed: on the worker, their
+        Python waits for the GIL, and the looks at the markers the first pass already has cost
+        more than the thread saves (on 320 x 240 views of a 36-marker grid, 2.98 against 2.87
+        ms)."""
         p = self.params
         work, scale = self._work_image(gray, sp.scale * base)
         window = sp.window if sp.window is not None else default_window(work.shape)
@@ -398,20 +398,17 @@ class MarkerDetector:
         binary = threshold(blurred, window=window, offset=p.offset if sp.offset is None else sp.offset)  # stage 3
         # stage 4: a marker's frame encloses its white cells, so ink without a hole is no marker;
         # stage 5 on those borders
-        return self._look(gray, _PassImage(work.shape, scale, window, candidates, blurred, binary,
-                                           find_candidates(binary, candidates, native=p.native)), look)
+        return self._polygons(_PassImage(work.shape, scale, window, candidates, blurred, binary,
+                                         find_candidates(binary, candidates, native=p.native)))
 
-    def _look(self, gray: NDArray[np.uint8], search: _PassImage, look: bool = True) -> _PassImage:
-        """The polygon corners of a pass's candidates in full-resolution pixels, and (``look``)
-        :meth:`_looks_right` for all of them: compiled, it releases the GIL, so the later
-        passes look on the worker thread (without it, only the candidates no earlier pass
-        proposed are looked at, in :meth:`_propose`)."""
+    @staticmethod
+    def _polygons(search: _PassImage) -> _PassImage:
+        """The polygon corners of a pass's candidates in full-resolution pixels (``approx``)."""
         k = len(search.found)
         if not k:
-            return replace(search, approx=np.zeros((0, 4, 2)), looks=np.zeros(0, bool))
+            return replace(search, approx=np.zeros((0, 4, 2)))
         approx = _clockwise(np.array([q for _, q in search.found], np.float64).reshape(k, 4, 2))
-        approx = (approx + 0.5) * search.scale - 0.5  # polygon corners in full-resolution pixels
-        return replace(search, approx=approx, looks=self._looks_right(gray, approx) if look else None)
+        return replace(search, approx=(approx + 0.5) * search.scale - 0.5)
 
     def _looks_right(self, gray: NDArray[np.uint8], approx: NDArray) -> NDArray[np.bool_]:
         """A cheap, lenient look at the cells of candidates (K, 4, 2) through their polygon
@@ -439,7 +436,7 @@ class MarkerDetector:
         n = self.dictionary.marker_size + 2 * bb
         cell_px = statistics.median(np.sqrt(np.abs(_areas(corners))).tolist()) / n  # np.median's value, cheaper
         per_side = int(np.clip(np.ceil(cell_px / 2), 4, 32))  # a sample per 2 px of cell, 4-32
-        white = cell_white_fractions(gray, corners, n, thr, per_side=per_side, margin=p.cell_margin, native=p.native)
+        white = cell_white_fractions(gray, corners, n, thr, per_side=per_side, margin=p.cell_margin)
         expected = self._cells_seen[ids, (4 - shift) % 4]  # decode: observed = rot90(true, (4 - shift) % 4)
         wrong = np.where(expected == 1, 1.0 - white, white)
         confidence = 1.0 - wrong.reshape(len(wrong), -1).mean(axis=1)
@@ -453,12 +450,11 @@ class MarkerDetector:
                  & (bad[:, ~frame].sum(axis=1) <= int(self.dictionary.max_correction * p.error_correction_rate)))
         return confidence, clear
 
-    def _eroded(self, gray: NDArray[np.uint8], found: _PassImage) -> _PassImage:
+    def _eroded(self, found: _PassImage) -> _PassImage:
         """Stage 3b: stages 4-5 again on a pass's binary image with its ink eroded (``erode``)."""
         binary = cv2.erode(found.binary, np.ones((self.params.erode,) * 2, np.uint8))
-        return self._look(gray, replace(found, binary=binary,
-                                        found=find_candidates(binary, found.candidates, native=self.params.native)),
-                          look=False)
+        return self._polygons(replace(found, binary=binary,
+                                      found=find_candidates(binary, found.candidates, native=self.params.native)))
 
     def _passes(self, gray: NDArray[np.uint8], passes: list[SearchPass], base: float) -> Iterator[_PassImage]:
         """Stages 2-5 of the search passes in order, then (``erode``) stage 3b on the first
@@ -476,9 +472,9 @@ class MarkerDetector:
                 yield job.result()
             if not threaded:
                 for sp in rest:
-                    yield self._search(gray, sp, base, look=False)
+                    yield self._search(gray, sp, base)
             if self.params.erode:
-                yield self._eroded(gray, first)
+                yield self._eroded(first)
         finally:
             for job in later:
                 job.cancel()
@@ -519,8 +515,8 @@ class MarkerDetector:
         fitted now.
 
         Pass by pass, a candidate that an earlier pass already proposed and fitted (or an
-        earlier one of its own pass proposed) is passed over and the others whose cells
-        looked right (:meth:`_look`) are fitted."""
+        earlier one of its own pass proposed) is passed over, the others are looked at
+        (:meth:`_looks_right`), and those whose cells look right are fitted."""
         p = self.params
         for search in group:
             self._log_pass(search, log)
@@ -530,8 +526,7 @@ class MarkerDetector:
         contours = [c for s in group for c, _ in s.found]
         scale = np.array([s.scale for s in group])[pass_of][:, None, :]  # (K, 1, 2)
         approx = np.concatenate([s.approx for s in group])
-        looks = np.concatenate([s.looks if s.looks is not None else np.zeros(len(s.found), bool) for s in group])
-        unlooked = {k for k, s in enumerate(group) if s.looks is None}
+        looks = np.zeros(len(approx), bool)
         t = len(taken)
         same = _same(np.concatenate([taken, approx]))[t:]  # (K, t + K): rows the group's candidates
         done = np.ones(t, bool)  # the candidates fitted so far: the earlier ones, then this group's
@@ -542,7 +537,7 @@ class MarkerDetector:
                 continue
             sub = same[mine]
             fresh = mine[~(sub[:, done].any(axis=1) | np.tril(sub[:, t + mine], -1).any(axis=1))]
-            if k in unlooked and len(fresh):
+            if len(fresh):
                 looks[fresh] = self._looks_right(gray, approx[fresh])
             if log is not None:
                 for i in fresh[~looks[fresh]].tolist():
@@ -601,7 +596,7 @@ class MarkerDetector:
             retry = np.flatnonzero(~(valid & matched) & (refined if use_fit else True))
             if not len(retry):
                 continue
-            again = sample_cells(gray, quads[retry], n_cells, per_side=4, native=p.native) if use_fit else _take(
+            again = sample_cells(gray, quads[retry], n_cells, per_side=4) if use_fit else _take(
                 cells, retry)
             read = read_bits(again, p.border_error_rate, border=bb, min_quiet_zone=p.min_quiet_zone,
                              shading=shading)

@@ -96,7 +96,7 @@ def _demo_flow(out: Path) -> bool:
 
 def _demo_localize() -> bool:
     """The localisation part of the demo: 1 s over a marker grid, pose + Kalman filter."""
-    from visloc.estimation.kalman import PositionVelocityKF
+    from visloc.estimation.fusion import MapFixFusion
     from visloc.pose.map_pose import estimate_camera_pose
     from visloc.pose.maps import GridMap
     from visloc.synth.grid import FLIGHT_CAMERA, render_map_flight
@@ -106,17 +106,17 @@ def _demo_localize() -> bool:
                                camera=FLIGHT_CAMERA)
     camera = Camera(flight.K, size=(320, 240))
     detector = MarkerDetector("DICT_4X4_100")
-    kf = PositionVelocityKF(3, model="cv", accel_noise=2.0)
+    fusion = MapFixFusion()  # localize's fusion, without the IMU
     tr = flight.track
     pos_err, vel_err = [], []
     for k, img in enumerate(flight.frames):
         mp = estimate_camera_pose(detector.detect(img), grid, camera)
-        kf.predict(float(tr.t[k]))
+        fusion.predict(float(tr.t[k]))
         if mp is not None:
-            kf.update_position(mp.position, std=0.002)
+            fusion.fix(mp.position, mp.position_covariance)
             pos_err.append(np.linalg.norm(mp.position - tr.position[k]))
         if k >= 5:
-            vel_err.append(np.linalg.norm(kf.velocity - tr.velocity[k]))
+            vel_err.append(np.linalg.norm(fusion.velocity - tr.velocity[k]))
     print(f"Localisation over a 10 x 10 marker grid ({len(tr.t)} frames, 320x240, 1 s, height "
           f"{tr.position[:, 2].mean():.2f} m): {len(pos_err)} poses, median position error "
           f"{1e3 * np.median(pos_err):.2f} mm; Kalman velocity error median {1e3 * np.median(vel_err):.0f} mm/s.")

@@ -71,7 +71,7 @@ def _read_imu(path: str) -> np.ndarray:
 def localize(args: argparse.Namespace) -> int:
     """``visloc localize``: the camera's position over a marker map per frame, filtered by a
     constant-velocity Kalman filter (filterpy) into position and velocity with uncertainty."""
-    from visloc.estimation.kalman import PositionVelocityKF
+    from visloc.estimation.fusion import MapFixFusion
     from visloc.io import CsvWriter
     from visloc.pose.map_pose import estimate_camera_pose
     from visloc.pose.maps import MarkerMap
@@ -82,8 +82,7 @@ def localize(args: argparse.Namespace) -> int:
     camera = Camera.from_file(args.camera)
     truth = read_columns(args.truth, "--truth", ("t", "x", "y", "z")) if args.truth else None
     imu = _read_imu(args.imu) if args.imu else None
-    kf = PositionVelocityKF(3, model="cv", accel_noise=args.accel_noise)
-    gravity = np.array([0.0, 0.0, -9.81])  # the map's z axis points up, out of the markers
+    fusion = MapFixFusion(accel_noise=args.accel_noise)  # the map's z axis points up: gravity (0, 0, -9.81)
     R_map_cam = None
     last_t = None
     failed = n_frames = fixes = imu_used = 0
@@ -105,27 +104,23 @@ def localize(args: argparse.Namespace) -> int:
                 continue
             cam = camera_for(camera, frame.image.shape, warned, "localize")
             mp = estimate_camera_pose(detector.detect(frame.image), mmap, cam)
-            accel = None
+            force = None
             if imu is not None and R_map_cam is not None and last_t is not None:
-                # mean specific force over the interval, turned into the map frame: a = R f + g
+                # mean specific force over the interval (camera axes), turned into the map frame
                 sel = (imu[:, 0] > last_t) & (imu[:, 0] <= frame.time)
                 if sel.any():
-                    accel = R_map_cam @ imu[sel, 1:].mean(axis=0) + gravity
+                    force = imu[sel, 1:].mean(axis=0)
                     imu_used += 1
-            kf.predict(frame.time, accel=accel)
+            fusion.predict(frame.time, force, R_map_cam if force is not None else None)
             last_t = frame.time
             frame_times.append(frame.time)
             if mp is not None:
                 R_map_cam = mp.R_map_cam
             fix = "none"
-            if mp is not None:
-                # the pose's own covariance, floored at 1 mm (model errors the corners don't show)
-                cov = mp.position_covariance
-                R = np.eye(3) * 1e-6 if cov is None else cov + np.eye(3) * 1e-6
-                fix = "used" if kf.update_position(mp.position, R=R) else "rejected"
+            if mp is not None:  # the pose's own covariance, floored (visloc.estimation.fusion)
+                fix = "used" if fusion.fix(mp.position, mp.position_covariance) else "rejected"
                 fixes += fix == "used"
-            pos, vel = kf.position, kf.velocity
-            sd = np.sqrt(np.clip(np.diag(kf.P)[:: kf.order], 0, None)) if kf.P is not None else np.full(3, np.nan)
+            pos, vel, sd = fusion.position, fusion.velocity, fusion.position_std
             row |= {"x": pos[0], "y": pos[1], "z": pos[2], "vx": vel[0], "vy": vel[1], "vz": vel[2],
                     "std_x": sd[0], "std_y": sd[1], "std_z": sd[2],
                     "markers": len(mp.used) if mp is not None else 0, "fix": fix}

@@ -14,7 +14,8 @@ Position/velocity (report eq. 3.14): :func:`luenberger_gains` by pole placement 
 formula, :func:`ackermann_observer_gain`, so repeated poles work) and the streaming two-axis
 :class:`LuenbergerObserver`; :class:`PositionVelocityKF`, a Kalman filter (filterpy inside) fusing
 position fixes, flow velocities and an accelerometer input, with chi-square gating and RTS
-smoothing.
+smoothing; :class:`MapFixFusion`, the one fusion of map-pose fixes and the accelerometer that
+``visloc localize``, the demo and the simulator use, its noise model in one place.
 """
 
 from visloc.estimation.attitude import (
@@ -25,6 +26,7 @@ from visloc.estimation.attitude import (
     euler_rates_matrix,
     wrap_angle,
 )
+from visloc.estimation.fusion import MapFixFusion
 from visloc.estimation.height import HeightEstimate, ultrasound_height, ultrasound_reading
 from visloc.estimation.kalman import PositionVelocityKF
 from visloc.estimation.observer import (
@@ -40,6 +42,7 @@ __all__ = [
     "GyroIntegrator",
     "HeightEstimate",
     "LuenbergerObserver",
+    "MapFixFusion",
     "PositionVelocityKF",
     "SwitchingFilter",
     "accel_tilt",

@@ -3,9 +3,9 @@
 - :class:`TruthEstimator`: the true state (the report's linear-design setting).
 - :class:`VisionEstimator`: visloc's own pipeline. Each bottom-camera image goes through
   :class:`visloc.markers.MarkerDetector` and :func:`visloc.pose.estimate_camera_pose` (the
-  report's marker grid, §3.2.2); the camera-centre fix corrects a filterpy Kalman filter
-  (:class:`visloc.estimation.PositionVelocityKF`) that integrates the accelerometer, rotated
-  into the inertial frame, at the IMU rate. The attitude integrates the gyro (report eq. 2.3)
+  report's marker grid, §3.2.2); the camera-centre fix corrects the Kalman filter of
+  :class:`visloc.estimation.fusion.MapFixFusion` (filterpy inside) that integrates the
+  accelerometer, rotated into the inertial frame, at the IMU rate. The attitude integrates the gyro (report eq. 2.3)
   and is pulled towards the map pose's attitude at each fix, the complementary filter of
   report eq. (3.4) with the vision angles in place of the accelerometer's (in flight the
   accelerometer of a drag-free quadrotor only sees the thrust axis). The body rates are the
@@ -22,8 +22,8 @@ from numpy.typing import NDArray
 
 from visloc.control._checks import as_array, check_real
 from visloc.control.controller import wrap_angle
+from visloc.estimation.fusion import MapFixFusion
 from visloc.estimation.height import ultrasound_height
-from visloc.estimation.kalman import PositionVelocityKF
 from visloc.markers.detector import MarkerDetector
 from visloc.model.rigid_body import euler_rate_matrix, rotation_matrix
 from visloc.pose.camera import Camera
@@ -102,8 +102,9 @@ class VisionEstimator:
         if localizer is not None and not callable(localizer):
             raise TypeError(f"localizer: expected a callable, got {type(localizer).__name__}")
         self.localizer = self._visloc_fix if localizer is None else localizer
-        self.kf = PositionVelocityKF(3, model="cv", initial_position=s[:3], initial_velocity=s[3:6],
-                                     initial_std=(0.01, 0.05), keep_history=False)
+        self.fusion = MapFixFusion(initial_position=s[:3], initial_velocity=s[3:6], initial_std=(0.01, 0.05),
+                                   keep_history=False, min_fix_std=self.min_fix_std, fix_std=self.fix_std)
+        self.kf = self.fusion.kf  # the ultrasound corrects z in it directly
         self.lam = s[6:9].copy()
         self.omega = s[9:12].copy()
         self.fixes = 0
@@ -123,8 +124,8 @@ class VisionEstimator:
         if dt > 0.0:
             self.lam = self.lam + euler_rate_matrix(self.lam) @ gyro * dt  # report eq. (2.3)
         self.omega = np.asarray(gyro, dtype=float)
-        a = rotation_matrix(self.lam) @ accel + np.array([0.0, 0.0, self.g])  # inertial, NED
-        self.kf.predict(t, accel=a, accel_std=self.accel_std)  # x = F x + B a
+        # x = F x + B a with a = R f + g, inertial NED (visloc.estimation.fusion)
+        self.fusion.predict(t, accel, rotation_matrix(self.lam), gravity=(0.0, 0.0, self.g), accel_std=self.accel_std)
 
     def _visloc_fix(self, image: NDArray[np.uint8]) -> tuple[Pose, FloatArray | None] | None:
         fix = estimate_camera_pose(self.detector.detect(image), self.camera.marker_map,
@@ -176,12 +177,7 @@ class VisionEstimator:
         position, R = self.camera.body_from_map(T_cam_map)
         error = wrap_angle(matrix_to_euler(R) - self.lam)  # elementwise on the three angles
         self.lam = self.lam + (1.0 - math.exp(-self.attitude_gain * dt)) * error  # report eq. (3.4)
-        floor = self.min_fix_std**2 * np.eye(3)
-        if cov is None:
-            R_fix = max(self.fix_std, self.min_fix_std) ** 2 * np.eye(3)
-        else:
-            R_fix = MAP_FROM_NED @ cov @ MAP_FROM_NED + floor
-        used = self.kf.update_position(position, R=R_fix)
+        used = self.fusion.fix(position, None if cov is None else MAP_FROM_NED @ cov @ MAP_FROM_NED)
         if used:
             self.fixes += 1
             self.last_fix_time = t

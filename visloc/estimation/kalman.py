@@ -191,6 +191,7 @@ class PositionVelocityKF:
         self.resets = 0
         self.last_nis = math.nan
         self._consecutive_rejections = 0
+        self._step_cache: dict[tuple[float, float], tuple[FloatArray, FloatArray, FloatArray | None]] = {}
         # per time step: t, posterior x and P, and (for RTS) the step's F, prior x and prior P
         self._ts: list[float] = []
         self._xs: list[FloatArray] = []
@@ -283,9 +284,14 @@ class PositionVelocityKF:
         ``Q = Q_discrete_white_noise(order, dt, var, block_size=dims)`` in filterpy's
         ``order_by_dim`` layout, which is the layout of ``x``. ``var`` follows ``accel_noise`` and
         ``accel_noise_kind``, or is ``accel_std^2`` when ``accel_std`` (m/s^2, per step) is given.
+        The arrays are read-only (kept for the next step of the same length).
         """
+        F, Q, _ = self._step(dt, accel_std)
+        return F, Q
+
+    def _step(self, dt: float, accel_std: float | None) -> tuple[FloatArray, FloatArray, FloatArray | None]:
+        """:meth:`transition`'s ``F``, ``Q`` and the input matrix ``B`` (``"cv"``), cached by step."""
         dt = check_real(dt, "dt", nonneg=True)
-        F = np.kron(np.eye(self.dims), _axis_F(self.order, dt))
         if accel_std is not None:
             var = check_real(accel_std, "accel_std", positive=True) ** 2
         elif self.accel_noise_kind == "std":
@@ -294,8 +300,19 @@ class PositionVelocityKF:
             var = self.accel_noise**2 / dt if dt > 0.0 else 0.0  # velocity: + q dt per step
         else:
             var = self.accel_noise**2 * dt  # acceleration: + q dt per step
-        Q = Q_discrete_white_noise(dim=self.order, dt=dt, var=var, block_size=self.dims)
-        return F, Q
+        key = (dt, var)
+        cached = self._step_cache.get(key)
+        if cached is None:  # a stream at a fixed rate asks for the same step again and again
+            F = np.kron(np.eye(self.dims), _axis_F(self.order, dt))
+            Q = Q_discrete_white_noise(dim=self.order, dt=dt, var=var, block_size=self.dims)
+            B = np.kron(np.eye(self.dims), np.array([[0.5 * dt * dt], [dt]])) if self.order == 2 else None
+            for a in (F, Q, B):
+                if a is not None:
+                    a.setflags(write=False)
+            if len(self._step_cache) >= 16:
+                self._step_cache.clear()
+            cached = self._step_cache[key] = (F, Q, B)
+        return cached
 
     def predict(self, t: float, accel: object = None, *, accel_std: float | None = None) -> None:
         """Advance the estimate to time ``t``.
@@ -342,11 +359,10 @@ class PositionVelocityKF:
         dt = t - self.t
         if dt == 0.0:
             return
-        F, Q = self.transition(dt, std if u is not None else None)
+        F, Q, B = self._step(dt, std if u is not None else None)
         if u is None:
             self.kf.predict(F=F, Q=Q)  # x = F x; P = F P F^T + Q
         else:
-            B = np.kron(np.eye(self.dims), np.array([[0.5 * dt * dt], [dt]]))
             self.kf.predict(u=u.reshape(-1, 1), B=B, F=F, Q=Q)  # x = F x + B u
         self.kf.P = 0.5 * (self.kf.P + self.kf.P.T)
         self.t = t

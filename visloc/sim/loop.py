@@ -202,25 +202,16 @@ def simulate(
     cam_dt = 1.0 / _check_rate(camera_rate, "camera_rate")
     rng = np.random.default_rng(seed)
     c, d = motor_coefficients(p, sigma, seed=seed)
-    start = sc.start_setpoint
-    initial = np.zeros(12)
-    initial[0:3], initial[8] = start[:3], start[3]
-    vehicle = Vehicle(p, c=c, d=d, motor_lag=motor_lag, state=initial)
+    vehicle = Vehicle(p, c=c, d=d, motor_lag=motor_lag, state=_at(sc.start_setpoint))
     vehicle.trim(np.full(4, hover_pwm(p)))
     controller = Controller(p, gains=gains, specs=specs)
     lead = (WARMUP_SECONDS if sigma > 0 else 0.0) if warmup is None else check_real(
         warmup, "warmup", nonneg=True)
-    for _ in range(round(lead / ctrl_dt)):  # hover on the true state: the integrators settle
-        cmd = controller.pwm(vehicle.state, start, ctrl_dt)
-        for _ in range(substeps):
-            vehicle.step(cmd.pwm, h)
+    _hover(vehicle, controller, sc.start_setpoint, round(lead / ctrl_dt), ctrl_dt, substeps)
     initial = vehicle.state.copy()
-    imu = Imu(rng=rng)
-    sonar = Ultrasound(rng=rng)
-    camera = None
-    if sc.estimator == "vision":
-        camera = BottomCamera(GridMap(**SIM_GRID), "DICT_4X4_100", rng=rng)
-        estimator: TruthEstimator | VisionEstimator = VisionEstimator(camera, initial, g=p.g,
+    sensors = _Sensors(rng, cam_dt) if sc.estimator == "vision" else None
+    if sensors is not None:
+        estimator: TruthEstimator | VisionEstimator = VisionEstimator(sensors.camera, initial, g=p.g,
                                                                       localizer=localizer)
     elif sc.estimator == "truth":
         estimator = TruthEstimator()
@@ -233,8 +224,7 @@ def simulate(
     saturated = np.zeros(n, bool)
     gust = np.zeros(3)
     gust_a = math.exp(-2.0 * math.pi * 1.0 * ctrl_dt)  # 1 Hz low-pass turbulence
-    next_frame, frames, next_echo = 0.0, 0, 0.0
-    status, reason = None, ""
+    ended: tuple[SimStatus, str] | None = None
     wall = time.perf_counter()
     k = 0
     done = 0  # steps whose records are complete
@@ -247,79 +237,118 @@ def simulate(
                 gust = gust_a * gust + math.sqrt(1 - gust_a**2) * sc.gust_std * rng.normal(size=3)
                 gust[2] = 0.0
                 force = gust if force is None else force + gust
-            R = vehicle.rotation()
-            if isinstance(estimator, VisionEstimator):
-                gyro, accel = imu.sample(s, R, vehicle.acceleration(force), p.g)
-                estimator.imu(t, gyro, accel)
-                if t + 1e-9 >= next_echo:  # report §3.2.1: the ultrasound at 25 Hz
-                    estimator.ultrasound(t, sonar.sample(s, R))
-                    next_echo += ULTRASOUND_PERIOD
-                if t + 1e-9 >= next_frame:
-                    try:
-                        image = camera.capture(s, R)  # type: ignore[union-attr]
-                    except ValueError as exc:  # the view left the printed floor
-                        status, reason = SimStatus.DIVERGED, f"vision lost at t = {t:.2f} s: {exc}"
-                    else:
-                        estimator.image(t, image, cam_dt)
-                        frames += 1
-                    next_frame += cam_dt
-                if status is None and t - estimator.last_fix_time > VISION_TIMEOUT:
-                    status, reason = SimStatus.DIVERGED, (
-                        f"vision lost: no marker-map fix for {VISION_TIMEOUT:g} s at t = {t:.2f} s")
+            if sensors is not None:
+                ended = sensors.sense(t, vehicle, force, estimator, p.g)  # type: ignore[arg-type]
             else:
-                estimator.observe(s)
+                estimator.observe(s)  # type: ignore[union-attr]
             sp = sc.setpoint(t)
             x_hat = estimator.state
             cmd = controller.pwm(x_hat, sp, ctrl_dt)  # report eqs. (4.5)-(4.6)
             states[k], estimates[k], setpoints[k], pwms[k] = s, x_hat, sp, cmd.pwm
             saturated[k] = cmd.saturated
             done = k + 1
-            if status is not None:
-                break
-            if s[2] > -p.cog_height:
-                status, reason = SimStatus.CRASHED, f"hit the floor at t = {t:.2f} s"
-            elif max(abs(s[6]), abs(s[7])) > CRASH_TILT:
-                status, reason = SimStatus.CRASHED, (
-                    f"tipped over at t = {t:.2f} s (roll {math.degrees(s[6]):.0f} deg, "
-                    f"pitch {math.degrees(s[7]):.0f} deg)")
-            elif np.linalg.norm(s[:3] - sp[:3]) > FAR:
-                status, reason = SimStatus.DIVERGED, f"drifted {FAR:g} m from the set point at t = {t:.2f} s"
-            if status is not None or k == n - 1:
+            ended = ended or _stopped(s, sp, t, p)
+            if ended is not None or k == n - 1:
                 break
             try:
                 for _ in range(substeps):
                     vehicle.step(cmd.pwm, h, force)
             except FloatingPointError as exc:
-                status, reason = SimStatus.DIVERGED, str(exc)
+                ended = SimStatus.DIVERGED, str(exc)
                 break
             if progress is not None and int((k + 1) * ctrl_dt) != int(k * ctrl_dt):
                 progress((k + 1) * ctrl_dt)
     except KeyboardInterrupt:  # Ctrl-C: keep the steps flown so far
         if done == 0:
             raise
-        status, reason = SimStatus.INTERRUPTED, f"interrupted at t = {done * ctrl_dt:.2f} s"
-        k = done - 1
+        ended, k = (SimStatus.INTERRUPTED, f"interrupted at t = {done * ctrl_dt:.2f} s"), done - 1
     wall = time.perf_counter() - wall
     m = k + 1
-    t_out, states, estimates = t_out[:m], states[:m], estimates[:m]
-    setpoints, pwms, saturated = setpoints[:m], pwms[:m], saturated[:m]
-    metrics = run_metrics(sc, t_out, states, estimates, setpoints, saturated, wall)
-    if isinstance(estimator, VisionEstimator):
-        metrics.update(camera_frames=frames, vision_fixes=estimator.fixes,
-                       vision_misses=estimator.misses)
+    records = (t_out[:m], states[:m], estimates[:m], setpoints[:m], pwms[:m], saturated[:m])
+    metrics = run_metrics(sc, records[0], records[1], records[2], records[3], records[5], wall)
+    if sensors is not None:
+        metrics.update(camera_frames=sensors.frames, vision_fixes=estimator.fixes,  # type: ignore[union-attr]
+                       vision_misses=estimator.misses)  # type: ignore[union-attr]
     if sc.step is not None:
         metrics.update(step_metrics_linear(controller.gains, p, sc, duration))
-    if status is None:
-        settle = metrics["settling_time_s"]
-        if settle is not None:
-            status, reason = SimStatus.SETTLED, (
-                f"within {sc.band * 100:.0f} cm of the set point from {settle:.2f} s on")
-        else:
-            status, reason = SimStatus.COMPLETED, (
-                f"ran {duration:g} s; ended {metrics['final_error_m'] * 100:.1f} cm from the set "
-                f"point (band {sc.band * 100:.0f} cm)")
+    status, reason = ended if ended is not None else _ran_out(sc, metrics, duration)
     motors = {"c": [float(v) for v in c], "d": [float(v) for v in d], "sigma": float(sigma)}
-    return SimResult(sc.name, status, reason, t_out, states, estimates, setpoints, pwms,
-                     saturated, metrics, motors)
+    return SimResult(sc.name, status, reason, *records[:5], records[5], metrics, motors)
+
+
+def _at(setpoint: FloatArray) -> FloatArray:
+    """A state (12,) at rest at a set point's position and yaw."""
+    state = np.zeros(12)
+    state[0:3], state[8] = setpoint[:3], setpoint[3]
+    return state
+
+
+def _hover(vehicle: Vehicle, controller: Controller, setpoint: FloatArray, steps: int, ctrl_dt: float,
+           substeps: int) -> None:
+    """Fly ``steps`` control steps at ``setpoint`` on the true state, unrecorded (the warm-up:
+    the integrators absorb the motors' spread)."""
+    for _ in range(steps):
+        cmd = controller.pwm(vehicle.state, setpoint, ctrl_dt)
+        for _ in range(substeps):
+            vehicle.step(cmd.pwm, ctrl_dt / substeps)
+
+
+def _stopped(s: FloatArray, sp: FloatArray, t: float, p: ARDrone2Params) -> tuple[SimStatus, str] | None:
+    """Why a run stops at time ``t`` with state ``s`` and set point ``sp``, or None: on the
+    floor, tipped over, or drifted :data:`FAR` from the set point."""
+    if s[2] > -p.cog_height:
+        return SimStatus.CRASHED, f"hit the floor at t = {t:.2f} s"
+    if max(abs(s[6]), abs(s[7])) > CRASH_TILT:
+        return SimStatus.CRASHED, (f"tipped over at t = {t:.2f} s (roll {math.degrees(s[6]):.0f} deg, "
+                                   f"pitch {math.degrees(s[7]):.0f} deg)")
+    if np.linalg.norm(s[:3] - sp[:3]) > FAR:
+        return SimStatus.DIVERGED, f"drifted {FAR:g} m from the set point at t = {t:.2f} s"
+    return None
+
+
+def _ran_out(sc: Scenario, metrics: dict, duration: float) -> tuple[SimStatus, str]:
+    """How a run that flew its whole duration ended: settled into its band, or not."""
+    settle = metrics["settling_time_s"]
+    if settle is not None:
+        return SimStatus.SETTLED, f"within {sc.band * 100:.0f} cm of the set point from {settle:.2f} s on"
+    return SimStatus.COMPLETED, (f"ran {duration:g} s; ended {metrics['final_error_m'] * 100:.1f} cm from the set "
+                                 f"point (band {sc.band * 100:.0f} cm)")
+
+
+class _Sensors:
+    """The vision scenario's sensors: the IMU at the control rate, the ultrasound at 25 Hz
+    (report §3.2.1) and the bottom camera over the printed grid at ``cam_dt``."""
+
+    def __init__(self, rng: np.random.Generator, cam_dt: float) -> None:
+        self.imu = Imu(rng=rng)
+        self.sonar = Ultrasound(rng=rng)
+        self.camera = BottomCamera(GridMap(**SIM_GRID), "DICT_4X4_100", rng=rng)
+        self.cam_dt = cam_dt
+        self.next_frame = self.next_echo = 0.0
+        self.frames = 0
+
+    def sense(self, t: float, vehicle: Vehicle, force: FloatArray | None, estimator: VisionEstimator,
+              g: float) -> tuple[SimStatus, str] | None:
+        """Feed the estimator what the sensors read at ``t``; why the run must stop, or None
+        (the view left the printed floor, or no fix for :data:`VISION_TIMEOUT` s)."""
+        s, R = vehicle.state, vehicle.rotation()
+        gyro, accel = self.imu.sample(s, R, vehicle.acceleration(force), g)
+        estimator.imu(t, gyro, accel)
+        if t + 1e-9 >= self.next_echo:
+            estimator.ultrasound(t, self.sonar.sample(s, R))
+            self.next_echo += ULTRASOUND_PERIOD
+        ended = None
+        if t + 1e-9 >= self.next_frame:
+            try:
+                image = self.camera.capture(s, R)
+            except ValueError as exc:  # the view left the printed floor
+                ended = SimStatus.DIVERGED, f"vision lost at t = {t:.2f} s: {exc}"
+            else:
+                estimator.image(t, image, self.cam_dt)
+                self.frames += 1
+            self.next_frame += self.cam_dt
+        if ended is None and t - estimator.last_fix_time > VISION_TIMEOUT:
+            ended = SimStatus.DIVERGED, f"vision lost: no marker-map fix for {VISION_TIMEOUT:g} s at t = {t:.2f} s"
+        return ended
 
 

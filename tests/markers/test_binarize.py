@@ -55,3 +55,14 @@ def test_threshold_marks_dark_border_of_a_square_as_ink():
 def test_default_window_is_odd_and_scales():
     assert default_window((480, 640)) % 2 == 1
     assert default_window((240, 320)) < default_window((1080, 1920))
+
+
+def test_stage_defaults_are_the_detectors():
+    import inspect
+
+    from visloc.markers.detector import DetectorParams
+
+    params = DetectorParams()
+    assert inspect.signature(blur).parameters["sigma"].default == params.blur_sigma
+    assert inspect.signature(threshold).parameters["window"].default == params.passes[0].window
+    assert inspect.signature(threshold).parameters["offset"].default == params.offset

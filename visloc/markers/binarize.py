@@ -21,10 +21,11 @@ def to_gray(image: NDArray[np.uint8]) -> NDArray[np.uint8]:
     return as_gray(image, "image")
 
 
-def blur(gray: NDArray[np.uint8], sigma: float = 0.8) -> NDArray[np.uint8]:
-    """Stage 2: Gaussian blur with standard deviation ``sigma`` px (0 returns ``gray``).
+def blur(gray: NDArray[np.uint8], sigma: float = 0.6) -> NDArray[np.uint8]:
+    """Stage 2: Gaussian blur with standard deviation ``sigma`` px (0 returns ``gray``); the
+    default is the detector's (``DetectorParams.blur_sigma``).
 
-    The kernel is ``2 * ceil(2.5 sigma) + 1`` wide, so ``sigma=0.8`` gives a 5x5 kernel.
+    The kernel is ``2 * ceil(2.5 sigma) + 1`` wide, so ``sigma=0.6`` gives a 5x5 kernel.
     """
     if sigma < 0:
         raise ValueError(f"sigma must be >= 0, got {sigma}")
@@ -40,7 +41,7 @@ def default_window(shape: tuple[int, ...]) -> int:
     return w | 1
 
 
-def threshold(gray: NDArray[np.uint8], *, window: int = 15, offset: float = 7.0) -> NDArray[np.uint8]:
+def threshold(gray: NDArray[np.uint8], *, window: int = 9, offset: float = 7.0) -> NDArray[np.uint8]:
     """Stage 3: adaptive local-mean threshold; 255 marks *dark* (ink) pixels.
 
     A pixel is ink when it is darker than the mean of its ``window x window`` neighbourhood
@@ -51,9 +52,10 @@ def threshold(gray: NDArray[np.uint8], *, window: int = 15, offset: float = 7.0)
     ----------
     gray : ndarray (H, W) uint8
     window : int
-        Odd neighbourhood size in pixels, >= 3.
+        Odd neighbourhood size in pixels, >= 3 (default: the detector's first search pass).
     offset : float
-        How much darker than the local mean a pixel must be, grey levels.
+        How much darker than the local mean a pixel must be, grey levels (default: the
+        detector's ``DetectorParams.offset``).
     """
     if window < 3 or window % 2 == 0:
         raise ValueError(f"window must be an odd integer >= 3, got {window}")

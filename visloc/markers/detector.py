@@ -2,12 +2,16 @@
 
 One frame's path:
 
-1. grey; then, per search pass (an image scale and a threshold window):
+1. grey; then, per search pass (an image scale and a threshold window; the passes after
+   the first on a worker thread):
    2. Gaussian blur, 3. adaptive threshold, 4. outer contours of ink regions that enclose
-   a hole, 5. candidate filter,
-   6. radial-peak corner split, 7. line fits -> candidate quads in full-resolution pixels;
-8. sub-pixel edge refinement of all candidates on the full-resolution grey image (batched;
-   candidates whose cells show no black border or no contrast are dropped first, cheaply);
+   a hole, 5. candidate filter (4 and 5 in one compiled call);
+   then, pass by pass on the main thread, for the candidates no earlier pass proposed: a cheap
+   look at their cells (no black border, no contrast, or a white-bit count no marker has:
+   dropped), 6. radial-peak corner split, 7. line fits -> candidate quads in full-resolution
+   pixels;
+8. sub-pixel edge refinement of all candidates on the full-resolution grey image (batched),
+   8b. curved sides under lens distortion;
 9. bit sampling with a per-marker threshold (each cell's bit the majority of its samples)
    and the black-border check (batched);
 10. dictionary match in four orientations, corners rotated so corner 0 is the marker's own

@@ -255,7 +255,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 #: options naming files or folders a command reads, and those it writes
-_INPUTS = ("source", "camera", "map", "height_csv", "imu", "dict", "body", "reference")
+_INPUTS = ("source", "camera", "map", "height_csv", "imu", "truth", "dict", "body", "reference")
 _OUTPUTS = ("out", "annotate", "rerun", "explain", "plot", "outdir", "output")
 
 

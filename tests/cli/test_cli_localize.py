@@ -112,3 +112,14 @@ def test_imu_rows_skipped_or_out_of_time_are_said(tmp_path, capsys):
     assert "1 rows without finite numbers skipped (lines 3)" in capsys.readouterr().err
     assert main([*base, "--imu", str(late)]) == 0
     assert "do not overlap" in capsys.readouterr().err
+
+
+def test_an_output_over_the_truth_file_is_refused(tmp_path, capsys):
+    src = tmp_path / "flight"
+    assert main(["render", "localize", str(src), "--seconds", "0.1", "--fps", "30"]) == 0
+    truth = tmp_path / "truth.csv"
+    truth.write_bytes((src / "ground_truth.csv").read_bytes())
+    before = truth.read_bytes()
+    code = main(["localize", str(src), "--camera", str(src / "camera.yml"), "--map", str(src / "map.yml"), "--fps", "30",
+                 "--truth", str(truth), "--out", str(truth)])
+    assert code == 2 and "overwritten" in capsys.readouterr().err and truth.read_bytes() == before

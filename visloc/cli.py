@@ -327,18 +327,25 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("visloc: interrupted; results written so far are kept", file=sys.stderr)
         return 130
-    except (UsageError, ValueError, OSError) as exc:  # the input's or the configuration's fault
+    except (UsageError, ValueError, OSError) as exc:
         if args.debug:
             raise
-        print(f"visloc {args.command}: error: {exc}", file=sys.stderr)
+        if type(exc) is ValueError and getattr(args, "started", False):  # inputs accepted: a bug
+            return _internal(args, exc)
+        print(f"visloc {args.command}: error: {exc}", file=sys.stderr)  # the input's or configuration's fault
         return 2
     except Exception as exc:  # a bug, not the user's input (TypeError included: the commands build
         # every object the library is given)
         if args.debug:
             raise
-        print(f"visloc {args.command}: internal error: {type(exc).__name__}: {exc} (rerun with --debug for the "
-              "traceback)", file=sys.stderr)
-        return 3
+        return _internal(args, exc)
+
+
+def _internal(args: argparse.Namespace, exc: BaseException) -> int:
+    """Report an internal error on one line (exit status 3)."""
+    print(f"visloc {args.command}: internal error: {type(exc).__name__}: {exc} (rerun with --debug for the "
+          "traceback)", file=sys.stderr)
+    return 3
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -245,3 +245,16 @@ def test_an_internal_error_is_one_line_exit_3_and_debug_anywhere_shows_it(render
     assert len(err.splitlines()) == 1 and "internal error" in err and "--debug" in err
     with pytest.raises(ZeroDivisionError):
         main(["detect", img, "--debug"])  # after the sub-command too
+
+
+def test_a_value_error_once_the_frames_run_is_visloc_s_fault(rendered, capsys, monkeypatch):
+    from visloc.markers import MarkerDetector
+
+    def broken(self, image):
+        raise ValueError("an internal check failed")
+
+    monkeypatch.setattr(MarkerDetector, "detect", broken)
+    assert main(["detect", str(min(rendered.glob("frame_*.png"))), "--quiet"]) == 3  # inputs were fine
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "internal error: ValueError" in err
+    assert main(["detect", str(rendered), "--dict", "DICT_NOPE"]) == 2  # before the frames: the input's fault

@@ -48,7 +48,9 @@ def detector_for(args: argparse.Namespace) -> MarkerDetector:
 
 def frames_of(source, args: argparse.Namespace):
     """The frames of an open source with a progress bar (unless ``--quiet``), stopping after
-    ``--max-frames``."""
+    ``--max-frames``. From the first frame on, ``args.started`` is True: the inputs were
+    accepted, so an exception from here on is visloc's fault (:func:`visloc.cli.main` reports
+    a ``ValueError`` as an internal error then, not as a usage error)."""
     try:
         total = len(source)
     except TypeError:
@@ -59,6 +61,7 @@ def frames_of(source, args: argparse.Namespace):
     for n, frame in enumerate(bar):
         if args.max_frames and n >= args.max_frames:
             break
+        args.started = True
         yield frame
 
 def marker_records(dets: list[MarkerDetection], poses: list[Pose | None] | None) -> list[dict]:

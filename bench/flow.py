@@ -6,7 +6,8 @@ exact per-pair ground truth), at 320x240 and 640x480, 60 FPS, speeds up to 2 m/s
 same way (visloc's ``ground_velocity``), so the comparison is of the image motion:
 
 - ``visloc``: ``block_flow`` + ``global_motion`` (similarity) + ``ground_velocity``;
-  ``visloc_cir``: the same with the report's Appendix H solver;
+  ``visloc_direct``: the same plus the sub-pixel stage (``visloc.flow.direct.refine_motion``,
+  ``estimate_ground_velocity(..., direct=True)``); ``visloc_cir``: the report's Appendix H solver;
 - ``dis``: ``cv2.DISOpticalFlow`` PRESET_ULTRAFAST dense flow, sampled on a grid,
   + ``cv2.estimateAffinePartial2D`` (RANSAC);
 - ``lk``: ``goodFeaturesToTrack`` + ``calcOpticalFlowPyrLK`` + ``estimateAffinePartial2D``;
@@ -30,6 +31,7 @@ import numpy as np
 from _results import fmt, write_results
 
 from visloc.flow import block_flow, global_motion, ground_velocity
+from visloc.flow.direct import refine_motion
 from visloc.pose import Camera
 from visloc.synth.flight import render_flight
 from visloc.types import GlobalMotion
@@ -58,6 +60,11 @@ def make_methods(size: tuple[int, int]) -> dict:
         f = block_flow(a, b)
         return global_motion(f, method=method), f
 
+    def visloc_direct(a, b):
+        f = block_flow(a, b)
+        m = global_motion(f)
+        return (refine_motion(a, b, m) if m.inliers >= 3 else m), f
+
     def run_dis(a, b):
         flow = dis.calc(a, b, None)
         d = flow[grid[:, 1].astype(int), grid[:, 0].astype(int)]
@@ -79,7 +86,8 @@ def make_methods(size: tuple[int, int]) -> dict:
         (dx, dy), _ = cv2.phaseCorrelate(a.astype(np.float32), b.astype(np.float32))
         return GlobalMotion(np.array([dx, dy]), 0.0, 1.0, None, 0.0, 99, "phase"), None
 
-    return {"visloc": visloc, "visloc_cir": lambda a, b: visloc(a, b, "cir"), "dis": run_dis, "lk": run_lk, "phase": run_phase}
+    return {"visloc": visloc, "visloc_direct": visloc_direct, "visloc_cir": lambda a, b: visloc(a, b, "cir"),
+            "dis": run_dis, "lk": run_lk, "phase": run_phase}
 
 
 def run(size, n_flights, seconds, rounds, seed0):

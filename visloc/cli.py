@@ -170,6 +170,8 @@ def build_parser() -> argparse.ArgumentParser:
     fl.add_argument("--fps", type=_positive, help="frame rate (required for image folders)")
     fl.add_argument("--method", default="similarity", choices=["similarity", "cir"],
                     help="global-motion solver (default: similarity; cir = report Appendix H)")
+    fl.add_argument("--direct", action="store_true",
+                    help="add the sub-pixel stage (direct alignment of the similarity): more accurate, slower")
     fl.add_argument("--out", metavar="FILE.csv", help="write one row per frame")
     fl.add_argument("--rerun", metavar="FILE.rrd", help="write a rerun recording")
     fl.add_argument("--max-frames", type=_count, metavar="N", help="stop after N frames")

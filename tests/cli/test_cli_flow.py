@@ -98,3 +98,16 @@ def test_a_frame_without_a_height_is_recorded_and_the_run_goes_on(flight, tmp_pa
     assert "no height for frame 3" in rows[3]["reason"] and float(rows[3]["quality"]) == 0
     assert rows[4]["vx"] != "" and float(rows[4]["quality"]) > 0.3  # the next frame is measured again
     assert "no height for frame 3" in capsys.readouterr().err
+
+
+def test_flow_direct_is_closer_to_the_truth(flight, tmp_path):
+    gt = _truth(flight)
+    true = np.stack([gt["pair_vx"][1:], gt["pair_vy"][1:]], axis=1)
+    errs = {}
+    for extra in ([], ["--direct"]):
+        out = tmp_path / f"v{len(extra)}.csv"
+        assert main(["flow", str(flight), "--camera", str(flight / "camera.yml"), "--height-csv",
+                     str(flight / "heights.csv"), "--fps", "60", "--out", str(out), "--quiet", *extra]) == 0
+        v = np.array([[float(r["vx"]), float(r["vy"])] for r in _rows(out)[1:]])
+        errs[bool(extra)] = np.median(np.linalg.norm(v - true, axis=1) / np.linalg.norm(true, axis=1))
+    assert errs[True] < errs[False]

@@ -90,7 +90,7 @@ def flow(args: argparse.Namespace) -> int:
             if ego is None or ego.frame_shape != frame.image.shape[:2]:
                 if ego is not None:
                     warn("flow", f"{frame.name} has another size than the frame before: the track restarts")
-                ego = EgoMotion(cam, options={"method": args.method})
+                ego = EgoMotion(cam, options={"method": args.method, "direct": args.direct})
                 ego.update(frame.image, height=height)
                 last_time = frame.time
                 if out:

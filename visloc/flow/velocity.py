@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from visloc.flow.block import block_flow, check_pair
+from visloc.flow.direct import refine_motion
 from visloc.flow.motion import global_motion
 from visloc.pose.camera import Camera
 from visloc.types import FlowField, GlobalMotion, GroundVelocity
@@ -129,10 +130,13 @@ def estimate_ground_velocity(
     *,
     gyro: NDArray | None = None,
     method: str = "similarity",
+    direct: bool = False,
     **flow_options: object,
 ) -> GroundVelocity:
     """Camera ground velocity from two consecutive downward frames: :func:`block_flow`, then
-    :func:`global_motion`, then :func:`ground_velocity` (conventions in the module docstring).
+    :func:`global_motion`, then (``direct=True``) the sub-pixel stage
+    :func:`visloc.flow.direct.refine_motion`, then :func:`ground_velocity` (conventions in the
+    module docstring).
 
     A texture-less pair gives ``quality`` 0 with a reason, never NaN.
     """
@@ -141,6 +145,8 @@ def estimate_ground_velocity(
     a, b = check_pair(prev, curr)
     fld = block_flow(a, b, **flow_options)  # type: ignore[arg-type]
     motion = global_motion(fld, method=method)
+    if direct and motion.inliers >= 3:
+        motion = refine_motion(a, b, motion)
     return ground_velocity(motion, camera, height, dt, gyro=gyro, field=fld)
 
 
@@ -160,7 +166,8 @@ class EgoMotion:
     fps : float, optional
         Default frame rate when :meth:`update` gets no ``dt`` or times.
     options : dict
-        Passed to :func:`block_flow` (and ``method`` to :func:`global_motion`).
+        Passed to :func:`block_flow` (``method`` to :func:`global_motion`; ``direct=True`` adds
+        the sub-pixel stage :func:`visloc.flow.direct.refine_motion`).
     """
 
     camera: Camera
@@ -213,8 +220,12 @@ class EgoMotion:
         a, b = check_pair(self._prev, img)
         opts = dict(self.options)
         method = opts.pop("method", "similarity")
+        direct = bool(opts.pop("direct", False))
         self.last_field = block_flow(a, b, **opts)
-        gv = ground_velocity(global_motion(self.last_field, method=method), self.camera, h, dt, gyro=gyro,
+        motion = global_motion(self.last_field, method=method)
+        if direct and motion.inliers >= 3:
+            motion = refine_motion(a, b, motion)
+        gv = ground_velocity(motion, self.camera, h, dt, gyro=gyro,
                              field=self.last_field)
         # integrate: the displacement is in the previous frame's axes
         c, s = np.cos(self._yaw), np.sin(self._yaw)

@@ -13,8 +13,10 @@ same way (visloc's ``ground_velocity``), so the comparison is of the image motio
 - ``lk``: ``goodFeaturesToTrack`` + ``calcOpticalFlowPyrLK`` + ``estimateAffinePartial2D``;
 - ``phase``: ``cv2.phaseCorrelate`` (translation only).
 
-Timing is interleaved per pair (each method in turn, several rounds) and covers image motion
-plus velocity. Usage: ``python bench/flow.py [--quick] [--rounds 3]``; writes
+Two more 320x240 sets pass the same flights through a camera (``FLOW_CAMERA``: optics blur, shot
+and read noise, vignetting, the sRGB curve, 8-bit quantisation), the second with every other
+frame exposed 20 % more (auto exposure stepping). Timing is interleaved per pair (each method in
+turn, several rounds) and covers image motion plus velocity. Usage: ``python bench/flow.py [--quick] [--rounds 3]``; writes
 ``bench/results/flow.json`` and ``flow.md``.
 """
 
@@ -24,6 +26,7 @@ import argparse
 import platform
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -33,6 +36,7 @@ from _results import fmt, write_results
 from visloc.flow import block_flow, global_motion, ground_velocity
 from visloc.flow.direct import refine_motion
 from visloc.pose import Camera
+from visloc.synth.camera import CameraEffects, apply_camera
 from visloc.synth.flight import render_flight
 from visloc.types import GlobalMotion
 
@@ -90,16 +94,38 @@ def make_methods(size: tuple[int, int]) -> dict:
             "dis": run_dis, "lk": run_lk, "phase": run_phase}
 
 
-def run(size, n_flights, seconds, rounds, seed0):
+#: the camera of the camera-like sets: optics blur, shot and read noise, vignetting, the sRGB
+#: curve, 8-bit quantisation; no lens distortion (every method maps image motion to velocity
+#: through the same pinhole model)
+FLOW_CAMERA = CameraEffects(blur_sigma=0.7, full_well=5000.0, read_noise=1.0, vignetting=0.2, k1=0.0,
+                            jpeg_quality=None)
+
+
+def _frames(fl, camera, exposure_step, seed):
+    """The flight's frames as rendered (linear, with its noise), or through ``camera``; with
+    ``exposure_step`` every other frame is exposed 20 % more (auto exposure stepping)."""
+    if camera is None:
+        return list(fl.frames)
+    rng = np.random.default_rng(seed)
+    out = []
+    for k, f in enumerate(fl.frames):
+        fx = replace(camera, exposure=1.2) if exposure_step and k % 2 else camera
+        out.append(apply_camera(f.astype(np.float64), fl.K, fx, rng)[0])
+    return out
+
+
+def run(size, n_flights, seconds, rounds, seed0, camera=None, exposure_step=False):
     methods = make_methods(size)
     pairs = []
     for i in range(n_flights):
         fl = render_flight(seconds, 60.0, size=size, seed=seed0 + i, max_speed=2.0, height=(0.5, 2.5),
-                           max_yaw_rate=1.5, noise_sigma=1.0, texture=("grass", "gravel", "brick")[i % 3])
+                           max_yaw_rate=1.5, noise_sigma=1.0 if camera is None else 0.0,
+                           texture=("grass", "gravel", "brick")[i % 3])
         cam = Camera(fl.K, size=size)
         tr = fl.track
+        frames = _frames(fl, camera, exposure_step, seed0 + i)
         for k in range(1, len(tr)):
-            pairs.append((fl.frames[k - 1], fl.frames[k], cam, float(tr.position[k - 1, 2]),
+            pairs.append((frames[k - 1], frames[k], cam, float(tr.position[k - 1, 2]),
                           tr.pair_v[k], float(tr.pair_yaw_rate[k])))
     times = {m: [] for m in methods}
     results = {m: [None] * len(pairs) for m in methods}
@@ -173,10 +199,13 @@ def main(argv=None) -> int:
     n_flights, seconds = (2, 0.5) if args.quick else (6, 2.0)
     result = {"machine": {"python": sys.version.split()[0], "opencv": cv2.__version__, "numpy": np.__version__,
                           "platform": platform.platform()}, "rounds": args.rounds, "sizes": {}}
-    for size in [(320, 240), (640, 480)]:
-        key = f"{size[0]}x{size[1]}"
+    sets = [((320, 240), None, False), ((640, 480), None, False), ((320, 240), FLOW_CAMERA, False),
+            ((320, 240), FLOW_CAMERA, True)]
+    for size, camera, step in sets:
+        key = f"{size[0]}x{size[1]}" + ("" if camera is None else ", camera-like") + (
+            ", +20 % exposure every other frame" if step else "")
         print(f"flow {key} ...", file=sys.stderr, flush=True)
-        res = run(size, n_flights, seconds, args.rounds, 10)
+        res = run(size, n_flights, seconds, args.rounds, 10, camera, step)
         res["still"] = still_frames(size)
         result["sizes"][key] = res
     write_results(args.out, "flow", result, markdown(result))

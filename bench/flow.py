@@ -15,7 +15,8 @@ same way (visloc's ``ground_velocity``), so the comparison is of the image motio
 
 Two more 320x240 sets pass the same flights through a camera (``FLOW_CAMERA``: optics blur, shot
 and read noise, vignetting, the sRGB curve, 8-bit quantisation), the second with every other
-frame exposed 20 % more (auto exposure stepping). Timing is interleaved per pair (each method in
+frame exposed 20 % more (auto exposure stepping); a third is slow flight (under 0.3 m/s at
+1.5-2.5 m: the image moves less than a pixel per frame, the hover regime). Timing is interleaved per pair (each method in
 turn, several rounds) and covers image motion plus velocity. Usage: ``python bench/flow.py [--quick] [--rounds 3]``; writes
 ``bench/results/flow.json`` and ``flow.md``.
 """
@@ -114,11 +115,12 @@ def _frames(fl, camera, exposure_step, seed):
     return out
 
 
-def run(size, n_flights, seconds, rounds, seed0, camera=None, exposure_step=False):
+def run(size, n_flights, seconds, rounds, seed0, camera=None, exposure_step=False, slow=False):
     methods = make_methods(size)
     pairs = []
     for i in range(n_flights):
-        fl = render_flight(seconds, 60.0, size=size, seed=seed0 + i, max_speed=2.0, height=(0.5, 2.5),
+        speed, heights = ((0.3, (1.5, 2.5)) if slow else (2.0, (0.5, 2.5)))  # slow: under 1 px per frame
+        fl = render_flight(seconds, 60.0, size=size, seed=seed0 + i, max_speed=speed, height=heights,
                            max_yaw_rate=1.5, noise_sigma=1.0 if camera is None else 0.0,
                            texture=("grass", "gravel", "brick")[i % 3])
         cam = Camera(fl.K, size=size)
@@ -199,13 +201,14 @@ def main(argv=None) -> int:
     n_flights, seconds = (2, 0.5) if args.quick else (6, 2.0)
     result = {"machine": {"python": sys.version.split()[0], "opencv": cv2.__version__, "numpy": np.__version__,
                           "platform": platform.platform()}, "rounds": args.rounds, "sizes": {}}
-    sets = [((320, 240), None, False), ((640, 480), None, False), ((320, 240), FLOW_CAMERA, False),
-            ((320, 240), FLOW_CAMERA, True)]
-    for size, camera, step in sets:
+    sets = [((320, 240), None, False, False), ((640, 480), None, False, False), ((320, 240), FLOW_CAMERA, False, False),
+            ((320, 240), FLOW_CAMERA, True, False), ((320, 240), FLOW_CAMERA, False, True)]
+    for size, camera, step, slow in sets:
         key = f"{size[0]}x{size[1]}" + ("" if camera is None else ", camera-like") + (
-            ", +20 % exposure every other frame" if step else "")
+            ", +20 % exposure every other frame" if step else "") + (
+            ", slow flight (under 0.3 m/s at 1.5-2.5 m: under a pixel per frame)" if slow else "")
         print(f"flow {key} ...", file=sys.stderr, flush=True)
-        res = run(size, n_flights, seconds, args.rounds, 10, camera, step)
+        res = run(size, n_flights, seconds, args.rounds, 10, camera, step, slow)
         res["still"] = still_frames(size)
         result["sizes"][key] = res
     write_results(args.out, "flow", result, markdown(result))

@@ -59,7 +59,8 @@ class MapFixFusion:
     kf : PositionVelocityKF
         The filter itself (3 axes, ``model="cv"``).
     fixes, rejected : int
-        Fixes used, and fixes the gate rejected.
+        Fixes used, and fixes not used (beyond the gate, or with a non-finite position or
+        covariance).
     """
 
     def __init__(self, *, accel_noise: float = 2.0, min_fix_std: float = 0.002, fix_std: float = 0.005,

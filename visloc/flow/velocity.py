@@ -144,10 +144,14 @@ def estimate_ground_velocity(
     _positive(dt, "dt")
     a, b = check_pair(prev, curr)
     fld = block_flow(a, b, **flow_options)  # type: ignore[arg-type]
+    return ground_velocity(_motion(a, b, fld, method, direct), camera, height, dt, gyro=gyro, field=fld)
+
+
+def _motion(a: NDArray[np.uint8], b: NDArray[np.uint8], fld: FlowField, method: str, direct: bool) -> GlobalMotion:
+    """The global motion of a frame pair's flow field, refined by :func:`refine_motion` when
+    ``direct`` (and the field gave a motion)."""
     motion = global_motion(fld, method=method)
-    if direct and motion.inliers >= 3:
-        motion = refine_motion(a, b, motion)
-    return ground_velocity(motion, camera, height, dt, gyro=gyro, field=fld)
+    return refine_motion(a, b, motion) if direct and motion.inliers >= 3 else motion
 
 
 @dataclass
@@ -222,10 +226,7 @@ class EgoMotion:
         method = opts.pop("method", "similarity")
         direct = bool(opts.pop("direct", False))
         self.last_field = block_flow(a, b, **opts)
-        motion = global_motion(self.last_field, method=method)
-        if direct and motion.inliers >= 3:
-            motion = refine_motion(a, b, motion)
-        gv = ground_velocity(motion, self.camera, h, dt, gyro=gyro,
+        gv = ground_velocity(_motion(a, b, self.last_field, method, direct), self.camera, h, dt, gyro=gyro,
                              field=self.last_field)
         # integrate: the displacement is in the previous frame's axes
         c, s = np.cos(self._yaw), np.sin(self._yaw)

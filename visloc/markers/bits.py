@@ -109,6 +109,13 @@ def _unit_grid(n: int, per_side: int) -> NDArray[np.float64]:
     return np.stack([x.ravel(), y.ravel()], axis=1) / n
 
 
+def _map_points(quads: NDArray, uv1: NDArray[np.float32]) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    """Image x and y (K, P) of the unit-square points ``uv1`` (3, P: u, v, 1) on each quad (K, 4, 2),
+    through :func:`square_to_quad` in single precision (``cv2.remap``'s maps)."""
+    hom = (square_to_quad(quads).reshape(-1, 3).astype(np.float32) @ uv1).reshape(len(quads), 3, -1)
+    return hom[:, 0] / hom[:, 2], hom[:, 1] / hom[:, 2]
+
+
 _GRIDS: dict[tuple[int, int], NDArray[np.float32]] = {}  # (3, P) points u, v, 1 per (n, per_side)
 
 
@@ -138,8 +145,7 @@ def sample_cells(gray: NDArray[np.uint8], quads: NDArray, n: int, *, per_side: i
         uv = _unit_grid(n, per_side)
         _GRIDS[n, per_side] = np.vstack([uv.T, np.ones(len(uv))]).astype(np.float32)
     uv1 = _GRIDS[n, per_side]  # (3, P): u, v, 1
-    hom = (square_to_quad(q).reshape(-1, 3).astype(np.float32) @ uv1).reshape(len(q), 3, -1)  # (K, 3, S)
-    mx, my = hom[:, 0] / hom[:, 2], hom[:, 1] / hom[:, 2]
+    mx, my = _map_points(q, uv1)
     raw = cv2.remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).reshape(len(q), -1, m)
     vals = raw.sum(axis=2, dtype=np.float64) / m
     samples = raw[:, : n * n].reshape(len(q), n, n, m)
@@ -208,10 +214,8 @@ def cell_white_fractions(gray: NDArray[np.uint8], quads: NDArray, n: int, thresh
     if len(q) == 0:
         return np.zeros((0, n, n))
     uv1 = _area_grid(n, per_side, float(margin))
-    hom = (square_to_quad(q).reshape(-1, 3).astype(np.float32) @ uv1).reshape(len(q), 3, -1)
     side = n * per_side  # one map row per sample row, markers in chunks: OpenCV maps stay under 32767 px
-    mx = (hom[:, 0] / hom[:, 2]).reshape(-1, side)
-    my = (hom[:, 1] / hom[:, 2]).reshape(-1, side)
+    mx, my = (a.reshape(-1, side) for a in _map_points(q, uv1))
     rows = (32000 // side) * side
     vals = np.concatenate([cv2.remap(gray, mx[a : a + rows], my[a : a + rows], cv2.INTER_LINEAR,
                                      borderMode=cv2.BORDER_REPLICATE) for a in range(0, len(mx), rows)])

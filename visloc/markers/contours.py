@@ -55,8 +55,7 @@ def outer_borders(binary: NDArray[np.uint8]) -> tuple[list[NDArray[np.int32]], N
     centres, each a closed 8-connected border traced in order, and a bool array with one
     flag per border. Holes (inner borders) are left out of the list.
     """
-    if binary.ndim != 2 or binary.dtype != np.uint8:
-        raise ValueError(f"binary must be a (H, W) uint8 image, got {binary.shape} {binary.dtype}")
+    _check_binary(binary)
     contours, hierarchy = cv2.findContours(binary, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
     if hierarchy is None:
         return [], np.zeros(0, bool)
@@ -75,17 +74,35 @@ def enclosing_borders(binary: NDArray[np.uint8], min_len: int = 1, max_len: int 
     ``native`` picks the compiled follower (``True``) or ``cv2.findContours`` (``False``);
     ``None`` uses the compiled one when it was built (:data:`NATIVE_BORDERS`).
     """
-    if binary.ndim != 2 or binary.dtype != np.uint8:
-        raise ValueError(f"binary must be a (H, W) uint8 image, got {binary.shape} {binary.dtype}")
+    _check_binary(binary)
     hi = np.iinfo(np.int64).max if max_len is None else int(max_len)
     if use_compiled(native, _borders, "visloc.markers._borders"):
-        b = np.ascontiguousarray(binary)
-        raw, raw_offsets = _borders.enclosing_borders(b, b.shape[0], b.shape[1], int(min_len), hi)
-        pts = np.frombuffer(raw, np.int32).reshape(-1, 2)
-        at = np.frombuffer(raw_offsets, np.int64).tolist()
-        return [pts[a:e] for a, e in pairwise(at)]
+        pts, offsets = _packed_borders(binary, int(min_len), hi)
+        return [pts[a:e] for a, e in pairwise(offsets.tolist())]
     contours, holes = outer_borders(binary)
     return [contours[i].reshape(-1, 2) for i in np.flatnonzero(holes) if min_len <= len(contours[i]) <= hi]
+
+
+def _check_binary(binary: NDArray) -> None:
+    if binary.ndim != 2 or binary.dtype != np.uint8:
+        raise ValueError(f"binary must be a (H, W) uint8 image, got {binary.shape} {binary.dtype}")
+
+
+def _packed_borders(binary: NDArray[np.uint8], min_len: int, max_len: int) -> tuple[NDArray[np.int32], NDArray[np.int64]]:
+    """The compiled stage 4: every kept border's points (P, 2) packed, and the offsets (K + 1)."""
+    b = np.ascontiguousarray(binary)
+    raw, raw_offsets = _borders.enclosing_borders(b, b.shape[0], b.shape[1], min_len, max_len)
+    return np.frombuffer(raw, np.int32).reshape(-1, 2), np.frombuffer(raw_offsets, np.int64)
+
+
+def _packed_filter(pts: NDArray, offsets: NDArray, shape: tuple[int, ...], lo: int, hi: int,
+                   params: CandidateFilter) -> tuple[list[int], NDArray[np.int32]]:
+    """The compiled stage 5 on packed borders: the indices of the kept ones, and their quads (K, 4, 2)."""
+    h, w = shape[:2]
+    raw_kept, raw_quads = _filter.filter_quads(
+        pts, offsets, w, h, (lo, hi, params.approx_rate, params.min_side, params.min_solidity,
+                             params.min_compactness, params.border_distance))
+    return np.frombuffer(raw_kept, np.int64).tolist(), np.frombuffer(raw_quads, np.int32).reshape(-1, 4, 2)
 
 
 def find_contours(binary: NDArray[np.uint8], *, enclosing: bool = False) -> list[NDArray[np.int32]]:
@@ -188,11 +205,8 @@ def filter_candidates(
         flat = [np.asarray(c).reshape(-1, 2) for c in contours]
         pts = np.ascontiguousarray(np.concatenate(flat), np.int32)
         offsets = np.concatenate([[0], np.cumsum([len(c) for c in flat])]).astype(np.int64)
-        raw_kept, raw_quads = _filter.filter_quads(
-            pts, offsets, w, h, (lo, hi, params.approx_rate, params.min_side, params.min_solidity,
-                                 params.min_compactness, params.border_distance))
-        quads = np.frombuffer(raw_quads, np.int32).reshape(-1, 4, 2)
-        return [(flat[i], quads[j]) for j, i in enumerate(np.frombuffer(raw_kept, np.int64).tolist())]
+        kept, quads = _packed_filter(pts, offsets, image_shape, lo, hi, params)
+        return [(flat[i], quads[j]) for j, i in enumerate(kept)]
     lengths = np.array(list(map(len, contours)), np.int64)
     keep = np.flatnonzero((lengths >= lo) & (lengths <= hi))
     bd = params.border_distance
@@ -253,18 +267,10 @@ def find_candidates(binary: NDArray[np.uint8], params: CandidateFilter = Candida
     if not (use_compiled(native, _borders, "visloc.markers._borders")
             and use_compiled(native, _filter, "visloc.markers._filter")):
         return filter_candidates(enclosing_borders(binary, lo, hi, native=native), binary.shape, params, native=native)
-    if binary.ndim != 2 or binary.dtype != np.uint8:
-        raise ValueError(f"binary must be a (H, W) uint8 image, got {binary.shape} {binary.dtype}")
-    b = np.ascontiguousarray(binary)
-    raw, raw_offsets = _borders.enclosing_borders(b, b.shape[0], b.shape[1], lo, hi)
-    pts = np.frombuffer(raw, np.int32).reshape(-1, 2)
-    offsets = np.frombuffer(raw_offsets, np.int64)
+    _check_binary(binary)
+    pts, offsets = _packed_borders(binary, lo, hi)
     if len(offsets) < 2:
         return []
-    h, w = binary.shape
-    raw_kept, raw_quads = _filter.filter_quads(
-        pts, offsets, w, h, (lo, hi, params.approx_rate, params.min_side, params.min_solidity,
-                             params.min_compactness, params.border_distance))
-    quads = np.frombuffer(raw_quads, np.int32).reshape(-1, 4, 2)
+    kept, quads = _packed_filter(pts, offsets, binary.shape, lo, hi, params)
     at = offsets.tolist()
-    return [(pts[at[i]:at[i + 1]], quads[j]) for j, i in enumerate(np.frombuffer(raw_kept, np.int64).tolist())]
+    return [(pts[at[i]:at[i + 1]], quads[j]) for j, i in enumerate(kept)]

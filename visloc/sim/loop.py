@@ -207,7 +207,7 @@ def simulate(
     controller = Controller(p, gains=gains, specs=specs)
     lead = (WARMUP_SECONDS if sigma > 0 else 0.0) if warmup is None else check_real(
         warmup, "warmup", nonneg=True)
-    _hover(vehicle, controller, sc.start_setpoint, round(lead / ctrl_dt), ctrl_dt, substeps)
+    _hover(vehicle, controller, sc.start_setpoint, round(lead / ctrl_dt), ctrl_dt, substeps, h)
     initial = vehicle.state.copy()
     sensors = _Sensors(rng, cam_dt) if sc.estimator == "vision" else None
     if sensors is not None:
@@ -284,13 +284,13 @@ def _at(setpoint: FloatArray) -> FloatArray:
 
 
 def _hover(vehicle: Vehicle, controller: Controller, setpoint: FloatArray, steps: int, ctrl_dt: float,
-           substeps: int) -> None:
-    """Fly ``steps`` control steps at ``setpoint`` on the true state, unrecorded (the warm-up:
-    the integrators absorb the motors' spread)."""
+           substeps: int, h: float) -> None:
+    """Fly ``steps`` control steps at ``setpoint`` on the true state, ``substeps`` RK4 steps
+    of ``h`` each, unrecorded (the warm-up: the integrators absorb the motors' spread)."""
     for _ in range(steps):
         cmd = controller.pwm(vehicle.state, setpoint, ctrl_dt)
         for _ in range(substeps):
-            vehicle.step(cmd.pwm, ctrl_dt / substeps)
+            vehicle.step(cmd.pwm, h)
 
 
 def _stopped(s: FloatArray, sp: FloatArray, t: float, p: ARDrone2Params) -> tuple[SimStatus, str] | None:

@@ -208,12 +208,13 @@ test_inverted_perspective_one_border_bit.__doc__ = PERSPECTIVE_DOC.format(
     "after 0.1 m enclosed by black squares at their corners, white after inversion)",
     bits="1 border bit (``inverted='both'``). The enclosing squares touch the marker's corners, "
     "so its border and theirs form one region: visloc needs its stage 3b (``erode=2``, off by "
-    "default for its cost) for these; with its defaults it misses 2 of the 12 views (0.7 m, "
-    "pitch 0 and 180, yaw 70)")
+    "default for its cost) for these; with its defaults it misses the 6 views with enclosing "
+    "squares (its stage 3c erodes only once a found marker touches other ink, and each view "
+    "holds one marker)")
 test_inverted_perspective_two_border_bits.__doc__ = PERSPECTIVE_DOC.format(
     variant=" (CV_InvertedArucoDetectionPerspective, see the one-bit variant)",
     bits="2 border bits (``inverted='both'`` and ``border_bits``; ``erode=2``: with visloc's "
-    "defaults 2 of the 12 views are missed, 0.3 and 0.7 m, pitch 0, yaw 110)")
+    "defaults the 6 views with enclosing squares are missed, as in the one-bit variant)")
 
 
 # ----------------------------------------------------------------------- CV_ArucoDetectionMarkerSize

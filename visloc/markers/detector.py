@@ -22,7 +22,10 @@ resolution closes the thin borders of small or oblique markers, a coarse window 
 image closes the borders of large, blurred ones, at a fraction of the cost. Stage 3b
 (``erode``, off by default) runs stage 4 once more on the first pass's binary image with the
 ink eroded, which separates markers whose border touches other ink at the corners (grid
-boards). In dark frames the pass on an image shrunk 4 times thresholds with a lower offset.
+boards). Stage 3c runs stage 3b (2 px) only when a found marker's corners touch other ink,
+then stages 6-10 on what it adds: AprilGrid-style boards cost the second look, frames of
+isolated markers a glance at their corners. In dark frames the pass on an image shrunk 4 times
+thresholds with a lower offset.
 
 White-on-black markers (``inverted=True``) are black-on-white markers of the inverted image;
 stage 8 then reads the inverted grey levels through the matching response. ``"both"`` runs
@@ -122,6 +125,12 @@ class DetectorParams:
         marker's border touches other ink at its corners (grid boards such as AprilGrids,
         markers on patterned cards), so the marker's own outline closes again; stage 8
         restores the true edges. ``erode=2`` costs about 0.5 ms per 640 x 480 frame.
+    board_retry : bool
+        Stage 3c: when ``erode`` is 0 and a found marker's corners touch other ink (dark just
+        outside at least two of its corners, light beyond its sides: a grid board such as an
+        AprilGrid, where each tag touches the board's corner squares), stage 3b runs with a
+        2 px square on the first pass's binary image, and stages 6-10 on the candidates it
+        adds. Frames without such a marker pay only the look at the found markers' corners.
     base_height : int
         Images whose short side exceeds this are searched at the base scale
         ``short side / base_height`` (stages 8-10 always use full resolution).
@@ -193,6 +202,7 @@ class DetectorParams:
     dark_mean: float = 50.0
     min_pass_size: int = 100
     erode: int = 0
+    board_retry: bool = True
     base_height: int = 540
     blur_sigma: float = 0.6
     offset: float = 7.0
@@ -357,6 +367,13 @@ class MarkerDetector:
         # each id's cells (1 = white) with its border, as seen at 0-3 quarter turns (decode's r)
         codes = np.pad(self.dictionary.bits, ((0, 0), (bb, bb), (bb, bb)))
         self._cells_seen = np.stack([np.rot90(codes, r, axes=(1, 2)) for r in range(4)], axis=1)
+        # stage 3c's probe points (12, 4) x corners (4, 2): half a cell outside the corners,
+        # inside them and outside the sides' midpoints, along the rays from the centre
+        step = 1.0 / (self.dictionary.marker_size + 2 * bb)
+        eye, centre = np.eye(4), np.full((4, 4), 0.25)
+        mid = 0.5 * (eye + eye[_NEXT])
+        self._board_probes = np.concatenate([eye + step * (eye - centre), eye - step * (eye - centre),
+                                             mid + step * (mid - centre)])
 
     def __repr__(self) -> str:
         return f"MarkerDetector({self.dictionary.name!r}, {self.params})"
@@ -454,15 +471,17 @@ class MarkerDetector:
                  & (bad[:, ~frame].sum(axis=1) <= int(self.dictionary.max_correction * p.error_correction_rate)))
         return confidence, clear
 
-    def _eroded(self, found: _PassImage) -> _PassImage:
-        """Stage 3b: stages 4-5 again on a pass's binary image with its ink eroded (``erode``)."""
-        binary = cv2.erode(found.binary, np.ones((self.params.erode,) * 2, np.uint8))
+    def _eroded(self, found: _PassImage, width: int) -> _PassImage:
+        """Stage 3b: stages 4-5 again on a pass's binary image with its ink eroded by a
+        square ``width`` px wide."""
+        binary = cv2.erode(found.binary, np.ones((width, width), np.uint8))
         return self._polygons(replace(found, binary=binary,
                                       found=find_candidates(binary, found.candidates, native=self.params.native)))
 
-    def _passes(self, gray: NDArray[np.uint8], passes: list[SearchPass], base: float) -> Iterator[_PassImage]:
+    def _passes(self, gray: NDArray[np.uint8], passes: list[SearchPass], base: float,
+                keep: list[_PassImage]) -> Iterator[_PassImage]:
         """Stages 2-5 of the search passes in order, then (``erode``) stage 3b on the first
-        pass's binary image. All passes but the first are computed on a worker thread
+        pass's binary image; the first pass is also appended to ``keep`` (for stage 3c). All passes but the first are computed on a worker thread
         meanwhile, up to :data:`_THREAD_MAX_PIXELS` (beyond, OpenCV's own threads already
         keep both cores of the bench machine busy and the hand-over only adds to the slowest
         frames)."""
@@ -471,6 +490,7 @@ class MarkerDetector:
         later = [_pool().submit(self._search, gray, sp, base) for sp in rest] if threaded else []
         try:
             first = self._search(gray, first_pass, base)
+            keep.append(first)
             yield first
             for job in later:
                 yield job.result()
@@ -478,7 +498,7 @@ class MarkerDetector:
                 for sp in rest:
                     yield self._search(gray, sp, base)
             if self.params.erode:
-                yield self._eroded(first)
+                yield self._eroded(first, self.params.erode)
         finally:
             for job in later:
                 job.cancel()
@@ -510,7 +530,29 @@ class MarkerDetector:
         else:  # a pass on an image shrunk below min_pass_size finds nothing the others miss
             short = min(gray.shape[:2]) / base
             passes = [sp for k, sp in enumerate(p.passes) if k == 0 or short / sp.scale >= p.min_pass_size]
-        return self._find(gray, self._passes(gray, passes, base), inverted, log)
+        first: list[_PassImage] = []
+        dets = self._find(gray, self._passes(gray, passes, base, first), inverted, log)
+        if p.board_retry and not p.erode and first and self._on_board(gray, dets):  # stage 3c
+            found = np.array([d.corners for d in dets])
+            more = self._find(gray, iter([self._eroded(first[0], 2)]), inverted, log, taken=found)
+            if more:
+                dets = _merge_duplicates([(d, abs(float(_areas(d.corners)))) for d in dets + more])
+        return dets
+
+    def _on_board(self, gray: NDArray[np.uint8], dets: list[MarkerDetection]) -> bool:
+        """Whether a found marker's corners touch other ink (stage 3c's trigger): half a cell
+        diagonally outside at least two of its corners the grey level is nearer its black
+        border's (half a cell inside the corners) than the light's half a cell outside its
+        sides' midpoints."""
+        if not dets:
+            return False
+        pts = np.matmul(self._board_probes, np.array([d.corners for d in dets]))  # (K, 12, 2)
+        h, w = gray.shape[:2]
+        xy = np.minimum(np.maximum(np.rint(pts), 0), (w - 1, h - 1)).astype(np.intp)
+        v = gray[xy[..., 1], xy[..., 0]].astype(np.float64)  # (K, 12)
+        black, light = v[:, 4:8].sum(axis=1), v[:, 8:].sum(axis=1)  # 4 x their mean levels
+        dark = (8 * v[:, :4] < (black + light)[:, None]).sum(axis=1)
+        return bool(((light - black > 40) & (dark >= 2)).any())
 
     def _propose(self, gray: NDArray[np.uint8], group: list[_PassImage], taken: NDArray, cands: _Cands,
                  log: dict | None) -> NDArray:
@@ -563,14 +605,15 @@ class MarkerDetector:
         return np.concatenate([taken, approx[done[t:]]])
 
     def _find(self, gray: NDArray[np.uint8], searches: Iterator[_PassImage], inverted: bool,
-              log: dict | None) -> list[MarkerDetection]:
+              log: dict | None, taken: NDArray | None = None) -> list[MarkerDetection]:
         """Stages 6-10 on the candidates of the searches (stages 2-5), in order (6-7:
-        :meth:`_propose`)."""
+        :meth:`_propose`), passing over candidates that repeat a quad of ``taken`` (K, 4, 2)."""
         p = self.params
         bb = p.border_bits
         n_cells = self.dictionary.marker_size + 2 * bb
         cands = _Cands()
-        taken = np.zeros((0, 4, 2))  # the polygons of the candidates fitted so far
+        if taken is None:
+            taken = np.zeros((0, 4, 2))  # the polygons of the candidates fitted so far
         searches = iter(searches)
         # the first pass's candidates, then those of all later passes at once (their stages
         # 2-5 ran on the worker meanwhile; one batch costs fewer numpy calls than one per pass)

@@ -141,3 +141,22 @@ def test_one_pixel_step_measures_the_shift():
     good = f.confidence > 0.2
     assert good.sum() >= 0.5 * len(good)
     assert np.abs(np.median(f.vectors[good], axis=0) - (2.5, -1.25)).max() < 0.08
+
+
+def test_a_prior_narrows_the_whole_image_match():
+    from visloc.flow.block import PRIOR_SEARCH, _global_shift
+
+    a, b = moved(7, -5)
+    free = block_flow(a, b)
+    near = block_flow(a, b, prior=(6.4, -4.2))  # within PRIOR_SEARCH: the same match
+    np.testing.assert_array_equal(free.vectors, near.vectors)
+    far = block_flow(a, b, prior=(-12.0, 9.0))  # the true shift is out of its reach
+    assert (far.confidence > 0.2).sum() < (free.confidence > 0.2).sum()
+    # _global_shift keeps to the window around `near`
+    rng = np.random.default_rng(2)
+    p = np.round(rng.normal(0, 500, 200).cumsum())
+    q = np.roll(p, 9)
+    assert _global_shift(p, q, 40) == 9
+    assert abs(_global_shift(p, q, 40, near=-10) + 10) <= PRIOR_SEARCH
+    with pytest.raises(ValueError, match="prior"):
+        block_flow(a, b, prior=(1.0, float("nan")))

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from visloc.flow import block_flow, estimate_ground_velocity, global_motion
+from visloc.flow import EgoMotion, block_flow, estimate_ground_velocity, global_motion
 from visloc.flow.direct import refine_motion
 from visloc.pose import Camera
 from visloc.synth.flight import render_flight
@@ -53,3 +53,56 @@ def test_a_start_it_cannot_improve_is_kept(flight):
     assert refine_motion(a[:20, :20], a[:20, :20], m) is m  # too small to refine
     with pytest.raises(ValueError, match="stride"):
         refine_motion(a, fl.frames[1], m, stride=0)
+
+
+def test_the_numpy_steps_give_the_compiled_result(flight):
+    pytest.importorskip("visloc.flow._direct", reason="the compiled stage was not built")
+    fl, _ = flight
+    for k in (5, 20):
+        a, b = fl.frames[k], fl.frames[k + 1]
+        m = global_motion(block_flow(a, b))
+        c, p = refine_motion(a, b, m, native=True), refine_motion(a, b, m, native=False)
+        assert c.method == p.method == m.method + "+direct"
+        np.testing.assert_allclose(c.translation, p.translation, atol=1e-9)
+        assert abs(c.rotation - p.rotation) < 1e-11 and abs(c.scale - p.scale) < 1e-11
+
+
+def test_a_failed_refinement_lowers_the_quality_and_says_why(flight, monkeypatch):
+    from visloc.flow import velocity
+
+    fl, cam = flight
+    a, b = fl.frames[5], fl.frames[6]
+    good = estimate_ground_velocity(a, b, cam, 1.0, 1 / 60, direct=True)
+    assert good.motion.method.endswith("+direct") and good.reason == ""
+    monkeypatch.setattr(velocity, "refine_motion", lambda a, b, m, **kw: m)  # as when it moved too far
+    bad = estimate_ground_velocity(a, b, cam, 1.0, 1 / 60, direct=True)
+    assert bad.reason == velocity.UNREFINED
+    assert bad.quality == pytest.approx(velocity.UNREFINED_QUALITY * good.quality)
+
+
+def test_a_prior_frees_the_stream_from_a_neighbouring_period():
+    # bricks: at frame 120 of this flight the block sums lock onto the next period of the
+    # pattern, about 8 px off, and the alignment from them cannot leave it; in a stream the
+    # previous pair's motion steers the whole-image match and starts the alignment
+    fl = render_flight(2.2, 60.0, size=(320, 240), seed=22, max_speed=2.0, height=(0.5, 2.5), max_yaw_rate=1.5,
+                       noise_sigma=1.0, texture="brick")
+    cam, tr = Camera(fl.K, size=(320, 240)), fl.track
+    k = 120
+    a, b = fl.frames[k - 1], fl.frames[k]
+    alone = estimate_ground_velocity(a, b, cam, float(tr.position[k - 1, 2]), 1 / 60, direct=True)
+    assert np.linalg.norm(alone.v - tr.pair_v[k]) > 1.0  # the aliased solution
+    for direct in (False, True):
+        ego = EgoMotion(cam, options={"direct": direct})
+        errs = []
+        for j in range(95, 131):
+            gv = ego.update(fl.frames[j], dt=1 / 60, height=float(tr.position[j - 1, 2]))
+            if gv is not None:
+                errs.append(np.linalg.norm(gv.v - tr.pair_v[j]) / np.linalg.norm(tr.pair_v[j]))
+                if j == k - 1:
+                    before = gv.motion
+        assert max(errs) < (0.05 if direct else 0.2)
+    # the alignment alone, started from the aliased block sums and from the prior
+    helped = refine_motion(a, b, global_motion(block_flow(a, b)), prior=before)
+    assert helped.method == "similarity+direct+prior"
+    assert np.abs(helped.translation - before.translation).max() < 1.0
+    assert np.abs(alone.motion.translation - before.translation).max() > 3.0

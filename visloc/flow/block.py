@@ -133,15 +133,20 @@ def _ones(m: int) -> NDArray:
     return ones
 
 
-def _global_shift(p: NDArray, q: NDArray, search: int) -> int:
+def _global_shift(p: NDArray, q: NDArray, search: int, near: int | None = None) -> int:
     """Integer d in [-S, S] minimising the sum of squared differences of the central part
     ``p[S : n - S]`` of ``p`` and ``q`` taken ``d`` further along (``S = min(search, n // 3)``),
     every shift compared over the same number of samples: ``sum q^2`` over each window
     minus twice the correlation (``p``'s own energy is the same for every shift); exact for
-    the whole-numbered profiles of :func:`_global_profiles`."""
+    the whole-numbered profiles of :func:`_global_profiles`. With ``near``, only the shifts
+    within :data:`PRIOR_SEARCH` of it are candidates (when any lies in [-S, S])."""
     n = len(p)
     s = min(search, n // 3)
     cost = np.correlate(q * q, _ones(n - 2 * s), "valid") - 2.0 * np.correlate(q, p[s : n - s], "valid")
+    if near is not None:
+        lo, hi = max(near - PRIOR_SEARCH, -s), min(near + PRIOR_SEARCH, s)
+        if lo <= hi:
+            return int(cost[lo + s : hi + s + 1].argmin()) + lo
     return int(cost.argmin()) - s
 
 
@@ -161,6 +166,10 @@ def _profile(g: NDArray, k: int, gradient: bool, out: NDArray) -> None:
     else:
         out[...] = bands
 
+
+#: Half-width (px) of the whole-image search around a ``prior`` shift (:func:`block_flow`):
+#: at 60 frames per second the image motion changes by well under a pixel from one pair to the next
+PRIOR_SEARCH = 3
 
 _NEIGHBOURS = np.array([-1, 0, 1])
 _BIG = np.float32(1e30)  # the cost of a shift outside the frame (finite: no NaN from inf - inf)
@@ -285,6 +294,7 @@ def block_flow(
     search: int | None = None,
     global_search: int | None = None,
     mode: str = "gradient",
+    prior: tuple[float, float] | None = None,
 ) -> FlowField:
     """Optical flow of image blocks from row and column band sums (report §3.2.2).
 
@@ -304,6 +314,11 @@ def block_flow(
         Search range of the whole-image match, px (default a quarter of the short side).
     mode : {"gradient", "intensity"}
         Match the derivative of the band sums (EdgeFlow) or the sums themselves (the report).
+    prior : (dx, dy), optional
+        The expected content displacement, px (e.g. the previous pair's, as
+        :class:`visloc.flow.EgoMotion` passes it): the whole-image match then only considers
+        shifts within :data:`PRIOR_SEARCH` px of it, so that over a periodic texture (bricks,
+        tiles) it does not lock onto a neighbouring period.
 
     Returns
     -------
@@ -314,6 +329,8 @@ def block_flow(
     a, b_img = check_pair(prev, curr)
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+    if prior is not None and (np.shape(prior) != (2,) or not np.isfinite(np.asarray(prior, np.float64)).all()):
+        raise ValueError(f"prior must be two finite numbers (dx, dy) in px, got {prior!r}")
     h, w = a.shape
     bsz = default_block(a.shape) if block is None else int(block)
     stp = bsz if step is None else int(step)
@@ -336,8 +353,9 @@ def block_flow(
     r0, r1, c0, c1 = ny // 3, ny - ny // 3, nx // 3, nx - nx // 3
     ga = _global_profiles(ia, r0 * stp, r1 * stp, c0 * stp, c1 * stp, rows, cols, grad)
     gb = _global_profiles(ib, r0 * stp, r1 * stp, c0 * stp, c1 * stp, rows, cols, grad)
-    sx = _global_shift(ga[0], gb[0], gsrch)
-    sy = _global_shift(ga[1], gb[1], gsrch)
+    near = (None, None) if prior is None else (round(float(prior[0])), round(float(prior[1])))
+    sx = _global_shift(ga[0], gb[0], gsrch, near[0])
+    sy = _global_shift(ga[1], gb[1], gsrch, near[1])
     gxb, gyb = _groups(ib, b_img, stp, rows, cols, sx, sy)
     # every block's x profile (from its rows' band) and y profile (from its columns' band),
     # as one list of segments: band row, start, and the second frame's offset for each

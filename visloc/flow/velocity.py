@@ -18,7 +18,7 @@ from flow rates.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -144,14 +144,46 @@ def estimate_ground_velocity(
     _positive(dt, "dt")
     a, b = check_pair(prev, curr)
     fld = block_flow(a, b, **flow_options)  # type: ignore[arg-type]
-    return ground_velocity(_motion(a, b, fld, method, direct), camera, height, dt, gyro=gyro, field=fld)
+    return _velocity(a, b, fld, method, direct, camera, height, dt, gyro)
 
 
-def _motion(a: NDArray[np.uint8], b: NDArray[np.uint8], fld: FlowField, method: str, direct: bool) -> GlobalMotion:
-    """The global motion of a frame pair's flow field, refined by :func:`refine_motion` when
-    ``direct`` (and the field gave a motion)."""
+#: the quality of a pair whose direct alignment (``direct=True``) failed or moved too far is
+#: scaled by this, with :data:`UNREFINED` as the reason: the block-sum motion stands, unrefined
+UNREFINED_QUALITY = 0.5
+UNREFINED = "the direct alignment did not converge near the block-sum motion"
+
+
+def _velocity(a: NDArray[np.uint8], b: NDArray[np.uint8], fld: FlowField, method: str, direct: bool,
+              camera: Camera, height: float, dt: float, gyro: NDArray | None,
+              prior: GlobalMotion | None = None) -> GroundVelocity:
+    """The ground velocity of a frame pair's flow field: its global motion, refined by
+    :func:`refine_motion` (from it and from ``prior``) when ``direct`` (and the field gave a
+    motion); a refinement that failed lowers the quality (:data:`UNREFINED_QUALITY`) and
+    says why."""
     motion = global_motion(fld, method=method)
-    return refine_motion(a, b, motion) if direct and motion.inliers >= 3 else motion
+    refine = direct and motion.inliers >= 3
+    if refine:
+        refined = refine_motion(a, b, motion, prior=prior)
+        failed, motion = refined is motion, refined
+    gv = ground_velocity(motion, camera, height, dt, gyro=gyro, field=fld)
+    if refine and failed and gv.quality > 0:
+        gv = replace(gv, quality=UNREFINED_QUALITY * gv.quality, reason=gv.reason or UNREFINED)
+    return gv
+
+
+#: The least quality of a pair whose motion :class:`EgoMotion` passes on as the next pair's prior
+PRIOR_QUALITY = 0.3
+
+
+def _prior(last: tuple[GlobalMotion, float] | None, dt: float) -> GlobalMotion | None:
+    """The previous pair's image motion carried over ``dt`` (constant rates): the second
+    start of the direct alignment (:func:`refine_motion`'s ``prior``)."""
+    if last is None:
+        return None
+    motion, last_dt = last
+    k = dt / last_dt
+    return replace(motion, translation=motion.translation * k, rotation=motion.rotation * k,
+                   scale=motion.scale**k, center_of_rotation=None)
 
 
 @dataclass
@@ -160,7 +192,11 @@ class EgoMotion:
 
     Call :meth:`update` with every new frame; the first frame only primes the stream. The
     track is in the first frame's camera axes (x right, y down in that image), in metres,
-    with the accumulated yaw; ``last_field`` is the last block flow.
+    with the accumulated yaw; ``last_field`` is the last block flow. Each pair of quality at
+    least :data:`PRIOR_QUALITY` passes its image motion on as the next pair's prior (carried
+    over the next ``dt``): the whole-image block match searches near it (``block_flow``'s
+    ``prior``) and the direct alignment starts from it too (``refine_motion``'s ``prior``),
+    so that over periodic textures the stream does not lock onto a neighbouring period.
 
     Parameters
     ----------
@@ -184,6 +220,7 @@ class EgoMotion:
     _time: float = field(default=0.0, init=False, repr=False)
     _pos: NDArray = field(default_factory=lambda: np.zeros(2), init=False, repr=False)
     _yaw: float = field(default=0.0, init=False, repr=False)
+    _last: tuple[GlobalMotion, float] | None = field(default=None, init=False, repr=False)  # motion, dt
 
     def __post_init__(self) -> None:
         for name in ("height", "fps"):
@@ -225,9 +262,13 @@ class EgoMotion:
         opts = dict(self.options)
         method = opts.pop("method", "similarity")
         direct = bool(opts.pop("direct", False))
+        prior = _prior(self._last, dt)
+        if prior is not None:  # the previous pair's motion steers the whole-image match
+            opts.setdefault("prior", tuple(prior.translation))
         self.last_field = block_flow(a, b, **opts)
-        gv = ground_velocity(_motion(a, b, self.last_field, method, direct), self.camera, h, dt, gyro=gyro,
-                             field=self.last_field)
+        gv = _velocity(a, b, self.last_field, method, direct, self.camera, h, dt, gyro, prior)
+        # a pair of low quality passes no prior on: the next match searches the whole range again
+        self._last = (gv.motion, dt) if gv.motion is not None and gv.quality >= PRIOR_QUALITY else None
         # integrate: the displacement is in the previous frame's axes
         c, s = np.cos(self._yaw), np.sin(self._yaw)
         step = gv.v * dt

@@ -7,7 +7,11 @@ same way (visloc's ``ground_velocity``), so the comparison is of the image motio
 
 - ``visloc``: ``block_flow`` + ``global_motion`` (similarity) + ``ground_velocity``;
   ``visloc_direct``: the same plus the sub-pixel stage (``visloc.flow.direct.refine_motion``,
-  ``estimate_ground_velocity(..., direct=True)``); ``visloc_cir``: the report's Appendix H solver;
+  ``estimate_ground_velocity(..., direct=True)``); ``visloc_stream``: ``EgoMotion(camera,
+  options={"direct": True})`` fed each flight's frames in order, as ``visloc flow --direct``
+  runs (the previous pair's motion steers the block sums, and after a good pair the next is
+  tracked by the direct alignment from it alone, the block sums every 30th pair);
+  ``visloc_cir``: the report's Appendix H solver;
 - ``dis``: ``cv2.DISOpticalFlow`` PRESET_ULTRAFAST dense flow, sampled on a grid,
   + ``cv2.estimateAffinePartial2D`` (RANSAC);
 - ``lk``: ``goodFeaturesToTrack`` + ``calcOpticalFlowPyrLK`` + ``estimateAffinePartial2D``;
@@ -34,7 +38,7 @@ import cv2
 import numpy as np
 from _results import fmt, write_results
 
-from visloc.flow import block_flow, global_motion, ground_velocity
+from visloc.flow import EgoMotion, block_flow, global_motion, ground_velocity
 from visloc.flow.direct import refine_motion
 from visloc.pose import Camera
 from visloc.synth.camera import CameraEffects, apply_camera
@@ -70,6 +74,21 @@ def make_methods(size: tuple[int, int]) -> dict:
         m = global_motion(f)
         return (refine_motion(a, b, m) if m.inliers >= 3 else m), f
 
+    stream: dict = {"ego": None, "last": None}
+    K = np.array([[300.0, 0.0, (w - 1) / 2.0], [0.0, 300.0, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
+
+    def visloc_stream(a, b):
+        # EgoMotion(direct=True) over consecutive pairs: a pair whose first frame is the
+        # previous pair's second continues the stream (tracking from the prior), else a new
+        # stream starts (its first frame's priming counted in this pair's time); the image
+        # motion does not depend on the camera or height given here
+        if stream["last"] is not a:
+            stream["ego"] = EgoMotion(Camera(K, size=size), options={"direct": True})
+            stream["ego"].update(a, dt=1 / 60.0, height=1.0)
+        gv = stream["ego"].update(b, dt=1 / 60.0, height=1.0)
+        stream["last"] = b
+        return gv.motion, stream["ego"].last_field
+
     def run_dis(a, b):
         flow = dis.calc(a, b, None)
         d = flow[grid[:, 1].astype(int), grid[:, 0].astype(int)]
@@ -91,7 +110,8 @@ def make_methods(size: tuple[int, int]) -> dict:
         (dx, dy), _ = cv2.phaseCorrelate(a.astype(np.float32), b.astype(np.float32))
         return GlobalMotion(np.array([dx, dy]), 0.0, 1.0, None, 0.0, 99, "phase"), None
 
-    return {"visloc": visloc, "visloc_direct": visloc_direct, "visloc_cir": lambda a, b: visloc(a, b, "cir"),
+    return {"visloc": visloc, "visloc_direct": visloc_direct, "visloc_stream": visloc_stream,
+            "visloc_cir": lambda a, b: visloc(a, b, "cir"),
             "dis": run_dis, "lk": run_lk, "phase": run_phase}
 
 

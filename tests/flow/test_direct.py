@@ -74,7 +74,7 @@ def test_a_failed_refinement_lowers_the_quality_and_says_why(flight, monkeypatch
     a, b = fl.frames[5], fl.frames[6]
     good = estimate_ground_velocity(a, b, cam, 1.0, 1 / 60, direct=True)
     assert good.motion.method.endswith("+direct") and good.reason == ""
-    monkeypatch.setattr(velocity, "refine_motion", lambda a, b, m, **kw: m)  # as when it moved too far
+    monkeypatch.setattr(velocity, "refine_blurred", lambda *args: (None, float("inf")))  # as when it moved too far
     bad = estimate_ground_velocity(a, b, cam, 1.0, 1 / 60, direct=True)
     assert bad.reason == velocity.UNREFINED
     assert bad.quality == pytest.approx(velocity.UNREFINED_QUALITY * good.quality)
@@ -106,3 +106,35 @@ def test_a_prior_frees_the_stream_from_a_neighbouring_period():
     assert helped.method == "similarity+direct+prior"
     assert np.abs(helped.translation - before.translation).max() < 1.0
     assert np.abs(alone.motion.translation - before.translation).max() > 3.0
+
+
+def test_the_stream_tracks_between_block_sum_pairs(flight, monkeypatch):
+    from visloc.flow import velocity
+
+    monkeypatch.setattr(velocity, "TRACK_FRAMES", 10)
+    fl, cam = flight
+    tr = fl.track
+    out = {}
+    for track in (True, False):
+        ego = EgoMotion(cam, options={"direct": True, "track": track})
+        out[track] = [ego.update(f, dt=1 / 60, height=float(tr.position[max(j - 1, 0), 2]))
+                      for j, f in enumerate(fl.frames)][1:]
+    kinds = ["tracked" if gv.motion.method.endswith("+tracked") else "block" for gv in out[True]]
+    assert kinds[0] == "block" and all(k == "block" for k in kinds[::10])  # re-anchored every 10th pair
+    assert kinds.count("tracked") >= 0.8 * len(kinds)
+    assert all(gv.motion.method.endswith("+direct") for gv in out[False])
+    for gt, gf in zip(out[True], out[False], strict=True):  # the same velocities, to the noise of a pair
+        assert np.linalg.norm(gt.v - gf.v) < 0.01 and 0.3 <= gt.quality <= 1
+
+
+def test_tracking_falls_back_to_the_block_sums_on_a_jump(flight):
+    fl, cam = flight
+    ego = EgoMotion(cam, options={"direct": True}, height=1.0, fps=60)
+    for f in fl.frames[:6]:
+        ego.update(f)
+    assert ego.update(fl.frames[6]).motion.method.endswith("+tracked")
+    jump = np.roll(fl.frames[7], (25, -40), axis=(0, 1))  # 40 px left, 25 down: far from the prior
+    gv = ego.update(jump)
+    assert not gv.motion.method.endswith("+tracked") and ego.last_field is not None
+    step = estimate_ground_velocity(fl.frames[6], fl.frames[7], cam, 1.0, 1 / 60, direct=True).motion
+    np.testing.assert_allclose(gv.motion.translation, step.translation + (-40, 25), atol=1.0)

@@ -1,7 +1,7 @@
 /* Flow's sub-pixel stage in C (visloc.flow.direct.refine_motion): point selection and the
  * Gauss-Newton steps, operation for operation as the numpy version in direct.py computes them.
  *
- * align(first, second, h, w, margin, stride, keep, iterations, a, b, tx, ty)
+ * align(first, second, h, w, margin, stride, keep, iterations, tol, a, b, tx, ty)
  *     -> (a, b, tx, ty, gain, offset, spread, ok)
  *     first, second: h x w float32 (the blurred frames); the similarity q = [[a, -b], [b, a]] p + t
  *     with p about the image centre ((w - 1) / 2, (h - 1) / 2); spread, the robust residual
@@ -16,7 +16,7 @@
  *    moved point; residual r = s - (gain T + offset); weights min(1, 2 spread / |r|),
  *    spread = 1.4826 median |r| (of every fourth point) + 1e-6; the 6 x 6 normal equations solved by Gaussian
  *    elimination with partial pivoting; the warp composed with the inverse of the step's,
- *    gain and offset added; stop when the translation moves less than 0.002 px.
+ *    gain and offset added; stop when the translation moves less than tol px.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -134,7 +134,7 @@ typedef struct {
  * centre, template T, its gradient gx, gy); 0, or -1 on failure. work: 2 n doubles. */
 static int steps(const float *second, int64_t h, int64_t w, double cx, double cy, const float *px,
                  const float *py, const float *T, const float *gx, const float *gy, int64_t n,
-                 int64_t iterations, similarity *s, double *work) {
+                 int64_t iterations, double tol, similarity *s, double *work) {
     double *r = work, *absr = work + n;
     for (int64_t it = 0; it < iterations; it++) {
         double A[6][6], g[6], d[6];
@@ -188,7 +188,7 @@ static int steps(const float *second, int64_t h, int64_t w, double cx, double cy
         s->ty = nty;
         s->gain += d[4];
         s->offset += d[5];
-        if (moved < 2e-3) break;
+        if (moved < tol) break;
     }
     return 0;
 }
@@ -197,10 +197,10 @@ static PyObject *align(PyObject *self, PyObject *args) {
     (void)self;
     Py_buffer fb, sb;
     Py_ssize_t h, w, margin, stride, iterations;
-    double keep;
+    double keep, tol;
     similarity s = {0, 0, 0, 0, 1.0, 0.0, 0.0};
-    if (!PyArg_ParseTuple(args, "y*y*nnnndndddd", &fb, &sb, &h, &w, &margin, &stride, &keep, &iterations, &s.a,
-                          &s.b, &s.tx, &s.ty))
+    if (!PyArg_ParseTuple(args, "y*y*nnnndnddddd", &fb, &sb, &h, &w, &margin, &stride, &keep, &iterations, &tol,
+                          &s.a, &s.b, &s.tx, &s.ty))
         return NULL;
     Py_ssize_t bytes = h * w * (Py_ssize_t)sizeof(float);
     if (h < 2 * margin + 3 || w < 2 * margin + 3 || margin < 1 || stride < 1 || iterations < 1 || fb.len != bytes ||
@@ -248,7 +248,7 @@ static PyObject *align(PyObject *self, PyObject *args) {
                 gys[n] = 0.5f * (first[(y + 1) * w + x] - first[(y - 1) * w + x]);
                 n++;
             }
-        ok = steps(second, h, w, cx, cy, px, py, T, gxs, gys, n, iterations, &s, work) == 0;
+        ok = steps(second, h, w, cx, cy, px, py, T, gxs, gys, n, iterations, tol, &s, work) == 0;
     }
     Py_END_ALLOW_THREADS
     PyBuffer_Release(&fb);
@@ -262,7 +262,7 @@ static PyObject *align(PyObject *self, PyObject *args) {
 
 static PyMethodDef methods[] = {
     {"align", align, METH_VARARGS,
-     "align(first, second, h, w, margin, stride, keep, iterations, a, b, tx, ty)\n"
+     "align(first, second, h, w, margin, stride, keep, iterations, tol, a, b, tx, ty)\n"
      "-> (a, b, tx, ty, gain, offset, spread, ok); see visloc.flow.direct."},
     {NULL, NULL, 0, NULL},
 };

@@ -27,7 +27,7 @@ from visloc._compiled import use_compiled
 from visloc.flow.motion import _rotation_centre
 from visloc.types import GlobalMotion
 
-__all__ = ["NATIVE_DIRECT", "refine_motion"]
+__all__ = ["NATIVE_DIRECT", "blurred", "direct_options", "refine_blurred", "refine_motion"]
 
 try:
     from visloc.flow import _direct
@@ -42,7 +42,7 @@ _MARGIN = 8  # px of the first frame left out at its border
 
 def refine_motion(prev: NDArray[np.uint8], curr: NDArray[np.uint8], motion: GlobalMotion, *,
                   prior: GlobalMotion | None = None, stride: int | None = None, keep: float = 0.5,
-                  iterations: int = 3, max_change: float = 3.0, blur: float = 1.0,
+                  iterations: int = 3, tolerance: float = 0.05, max_change: float = 3.0, blur: float = 1.0,
                   native: bool | None = None) -> GlobalMotion:
     """``motion`` (the block-sum solution between the grey frames ``prev`` and ``curr``)
     refined by direct alignment (module docstring).
@@ -68,7 +68,11 @@ def refine_motion(prev: NDArray[np.uint8], curr: NDArray[np.uint8], motion: Glob
         Share of the grid points kept, those with the strongest gradients, in (0, 1].
     iterations : int
         Most Gauss-Newton steps (>= 1); fewer when a step moves the translation by less than
-        0.002 px.
+        ``tolerance`` px.
+    tolerance : float
+        See ``iterations``, px. A step shrinks the remaining error about 40 times (from 0.03
+        to 0.0008 px on camera-like frames), so after a step under 0.05 px about 0.001 px is
+        left, well below the noise of one pair.
     max_change : float
         Largest move of an image corner from its start's, px, for the result to be trusted.
     blur : float
@@ -89,23 +93,44 @@ def refine_motion(prev: NDArray[np.uint8], curr: NDArray[np.uint8], motion: Glob
     h, w = prev.shape
     if min(h, w) < 4 * _MARGIN:  # too small to leave a border out: nothing to refine on
         return motion
+    options = direct_options((h, w), stride=stride, keep=keep, iterations=iterations, tolerance=tolerance,
+                             max_change=max_change, native=native)
+    found, _ = refine_blurred((blurred(prev, blur), blurred(curr, blur)), motion, prior, options)
+    return motion if found is None else found
+
+
+def direct_options(shape: tuple[int, int], *, stride: int | None = None, keep: float = 0.5, iterations: int = 3,
+                   tolerance: float = 0.05, max_change: float = 3.0, native: bool | None = None) -> tuple:
+    """:func:`refine_motion`'s options, checked, for frames of ``shape`` (H, W): the tuple
+    :func:`refine_blurred` takes (``stride`` None: a 120th of the short side)."""
     if stride is None:
-        stride = max(1, round(min(h, w) / 120))
+        stride = max(1, round(min(shape) / 120))
     if isinstance(stride, bool) or int(stride) != stride or stride < 1 or not 0 < keep <= 1 or iterations < 1:
         raise ValueError(f"stride must be an integer >= 1, keep in (0, 1], iterations >= 1; got {stride}, {keep}, "
                          f"{iterations}")
-    compiled = use_compiled(native, _direct, "visloc.flow._direct")
-    frames = (_blurred(prev, blur), _blurred(curr, blur))
-    options = (int(stride), float(keep), int(iterations), float(max_change), compiled)
+    if not tolerance >= 0:
+        raise ValueError(f"tolerance must be >= 0 px, got {tolerance!r}")
+    return (int(stride), float(keep), int(iterations), float(tolerance), float(max_change),
+            use_compiled(native, _direct, "visloc.flow._direct"))
+
+
+def refine_blurred(frames: tuple[NDArray[np.float32], NDArray[np.float32]], motion: GlobalMotion,
+                   prior: GlobalMotion | None, options: tuple) -> tuple[GlobalMotion | None, float]:
+    """:func:`refine_motion` on frames already blurred (:func:`blurred`), with the options of
+    :func:`direct_options`: the refined motion (None when the alignment failed or moved too
+    far) and its residual spread (1.4826 median |r|, grey levels; inf when it failed)."""
+    h, w = frames[0].shape
+    if min(h, w) < 4 * _MARGIN:
+        return None, math.inf
     found, spread = _refine_from(frames, motion, options)
     if prior is not None and _corner_shift(prior, motion, (w, h)) > 1.0:
         other, other_spread = _refine_from(frames, prior, options)
         if other is not None and (found is None or other_spread <= 1.25 * spread):
             return replace(other, method=motion.method + "+direct+prior", residual_rms=motion.residual_rms,
-                           inliers=motion.inliers)
+                           inliers=motion.inliers), other_spread
     if found is None:
-        return motion
-    return replace(found, method=motion.method + "+direct")
+        return None, math.inf
+    return replace(found, method=motion.method + "+direct"), spread
 
 
 def _similarity(m: GlobalMotion) -> tuple[float, float, float, float]:
@@ -132,12 +157,12 @@ def _refine_from(frames: tuple[NDArray[np.float32], NDArray[np.float32]], start:
     """The alignment from ``start`` and its residual spread; None when it failed, moved an
     image corner more than ``max_change`` px from ``start`` or found an implausible gain."""
     first, second = frames
-    stride, keep, iterations, max_change, compiled = options
+    stride, keep, iterations, tol, max_change, compiled = options
     h, w = first.shape
     if compiled:
-        *found, ok = _direct.align(first, second, h, w, _MARGIN, stride, keep, iterations, *_similarity(start))
+        *found, ok = _direct.align(first, second, h, w, _MARGIN, stride, keep, iterations, tol, *_similarity(start))
     else:
-        found, ok = _align(first, second, stride, keep, iterations, _similarity(start))
+        found, ok = _align(first, second, stride, keep, iterations, tol, _similarity(start))
     if not ok:
         return None, math.inf
     a, b, tx, ty, gain, _, spread = found
@@ -149,8 +174,9 @@ def _refine_from(frames: tuple[NDArray[np.float32], NDArray[np.float32]], start:
     return moved, spread
 
 
-def _blurred(img: NDArray[np.uint8], sigma: float) -> NDArray[np.float32]:
-    """``img`` as float32, blurred by a Gaussian of ``sigma`` px (none for 0)."""
+def blurred(img: NDArray[np.uint8], sigma: float = 1.0) -> NDArray[np.float32]:
+    """``img`` as float32, blurred by a Gaussian of ``sigma`` px (none for 0): what the direct
+    alignment reads."""
     if sigma <= 0:
         return img.astype(np.float32)
     k = 2 * math.ceil(2 * sigma) + 1
@@ -192,7 +218,7 @@ def _sample(img: NDArray[np.float64], x: NDArray, y: NDArray) -> NDArray:
 
 
 def _align(first: NDArray[np.float32], second: NDArray[np.float32], stride: int, keep: float, iterations: int,
-           start: tuple[float, float, float, float]) -> tuple[list[float], bool]:
+           tol: float, start: tuple[float, float, float, float]) -> tuple[list[float], bool]:
     """The numpy version of the compiled ``_direct.align``: the similarity, gain, offset and
     the last step's residual spread after the inverse-compositional Gauss-Newton steps from
     ``start`` (a, b, tx, ty), and whether they succeeded."""
@@ -223,6 +249,6 @@ def _align(first: NDArray[np.float32], second: NDArray[np.float32], stride: int,
         ntx, nty = tx - (na * d[2] - nb * d[3]), ty - (nb * d[2] + na * d[3])
         moved = abs(ntx - tx) + abs(nty - ty)
         a, b, tx, ty, gain, offset = na, nb, ntx, nty, gain + d[4], offset + d[5]
-        if moved < 2e-3:
+        if moved < tol:
             break
     return [a, b, tx, ty, gain, offset, spread], True

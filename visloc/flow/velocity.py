@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from visloc.flow.block import block_flow, check_pair
-from visloc.flow.direct import refine_motion
+from visloc.flow.direct import blurred, direct_options, refine_blurred
 from visloc.flow.motion import global_motion
 from visloc.pose.camera import Camera
 from visloc.types import FlowField, GlobalMotion, GroundVelocity
@@ -144,7 +144,7 @@ def estimate_ground_velocity(
     _positive(dt, "dt")
     a, b = check_pair(prev, curr)
     fld = block_flow(a, b, **flow_options)  # type: ignore[arg-type]
-    return _velocity(a, b, fld, method, direct, camera, height, dt, gyro)
+    return _velocity(a, b, fld, method, direct, camera, height, dt, gyro)[0]
 
 
 #: the quality of a pair whose direct alignment (``direct=True``) failed or moved too far is
@@ -154,25 +154,35 @@ UNREFINED = "the direct alignment did not converge near the block-sum motion"
 
 
 def _velocity(a: NDArray[np.uint8], b: NDArray[np.uint8], fld: FlowField, method: str, direct: bool,
-              camera: Camera, height: float, dt: float, gyro: NDArray | None,
-              prior: GlobalMotion | None = None) -> GroundVelocity:
-    """The ground velocity of a frame pair's flow field: its global motion, refined by
-    :func:`refine_motion` (from it and from ``prior``) when ``direct`` (and the field gave a
-    motion); a refinement that failed lowers the quality (:data:`UNREFINED_QUALITY`) and
-    says why."""
+              camera: Camera, height: float, dt: float, gyro: NDArray | None, prior: GlobalMotion | None = None,
+              frames: tuple[NDArray[np.float32], NDArray[np.float32]] | None = None) -> tuple[GroundVelocity, float]:
+    """The ground velocity of a frame pair's flow field: its global motion, refined by the
+    direct alignment (from it and from ``prior``; on ``frames``, the pair blurred, when given)
+    when ``direct`` (and the field gave a motion); a refinement that failed lowers the
+    quality (:data:`UNREFINED_QUALITY`) and says why. Also the alignment's residual spread
+    (inf without one)."""
     motion = global_motion(fld, method=method)
     refine = direct and motion.inliers >= 3
+    spread = math.inf
     if refine:
-        refined = refine_motion(a, b, motion, prior=prior)
-        failed, motion = refined is motion, refined
+        if frames is None:
+            frames = (blurred(a), blurred(b))
+        refined, spread = refine_blurred(frames, motion, prior, direct_options(a.shape))
+        failed = refined is None
+        motion = motion if failed else refined
     gv = ground_velocity(motion, camera, height, dt, gyro=gyro, field=fld)
     if refine and failed and gv.quality > 0:
         gv = replace(gv, quality=UNREFINED_QUALITY * gv.quality, reason=gv.reason or UNREFINED)
-    return gv
+    return gv, spread
 
 
 #: The least quality of a pair whose motion :class:`EgoMotion` passes on as the next pair's prior
 PRIOR_QUALITY = 0.3
+#: Tracking (:class:`EgoMotion`, ``direct``): every this many pairs the block sums run again
+TRACK_FRAMES = 30
+#: Tracking: a pair whose alignment residuals exceed this many times the last block-sum pair's
+#: goes through the block sums instead
+TRACK_SPREAD = 2.0
 
 
 def _prior(last: tuple[GlobalMotion, float] | None, dt: float) -> GlobalMotion | None:
@@ -207,7 +217,15 @@ class EgoMotion:
         Default frame rate when :meth:`update` gets no ``dt`` or times.
     options : dict
         Passed to :func:`block_flow` (``method`` to :func:`global_motion`; ``direct=True`` adds
-        the sub-pixel stage :func:`visloc.flow.direct.refine_motion`).
+        the sub-pixel stage :func:`visloc.flow.direct.refine_motion`; ``track=False`` turns
+        tracking off).
+
+    With ``direct=True`` the stream tracks: a pair after a good one is aligned from the prior
+    alone, without the block sums (its motion's ``method`` ends in ``"+tracked"`` and
+    ``last_field`` is None), as long as its residuals stay within :data:`TRACK_SPREAD` times
+    those of the last pair that went through the block sums (the anchor), and at least every
+    :data:`TRACK_FRAMES` pairs the block sums run again. Tracking costs a third of the full
+    path per pair at 320 x 240.
     """
 
     camera: Camera
@@ -221,6 +239,8 @@ class EgoMotion:
     _pos: NDArray = field(default_factory=lambda: np.zeros(2), init=False, repr=False)
     _yaw: float = field(default=0.0, init=False, repr=False)
     _last: tuple[GlobalMotion, float] | None = field(default=None, init=False, repr=False)  # motion, dt
+    _blurred: NDArray[np.float32] | None = field(default=None, init=False, repr=False)  # the last frame's
+    _anchor: tuple[float, float, int] | None = field(default=None, init=False, repr=False)  # spread, quality, age
 
     def __post_init__(self) -> None:
         for name in ("height", "fps"):
@@ -262,13 +282,27 @@ class EgoMotion:
         opts = dict(self.options)
         method = opts.pop("method", "similarity")
         direct = bool(opts.pop("direct", False))
+        track = bool(opts.pop("track", True))
         prior = _prior(self._last, dt)
-        if prior is not None:  # the previous pair's motion steers the whole-image match
-            opts.setdefault("prior", tuple(prior.translation))
-        self.last_field = block_flow(a, b, **opts)
-        gv = _velocity(a, b, self.last_field, method, direct, self.camera, h, dt, gyro, prior)
+        frames = None
+        if direct:  # each frame is blurred once: as the second of one pair, the first of the next
+            if self._blurred is None or self._blurred.shape != a.shape:
+                self._blurred = blurred(a)
+            frames = (self._blurred, blurred(b))
+        gv, lost = self._tracked(frames, prior, method, h, dt, gyro) if direct and track else (None, False)
+        if gv is None:
+            if prior is not None and not lost:  # the previous pair's motion steers the whole-image match
+                opts.setdefault("prior", tuple(prior.translation))
+            self.last_field = block_flow(a, b, **opts)
+            gv, spread = _velocity(a, b, self.last_field, method, direct, self.camera, h, dt, gyro, prior, frames)
+            good = math.isfinite(spread) and gv.quality >= PRIOR_QUALITY
+            self._anchor = (spread, gv.quality, 0) if good else None
+        else:
+            self.last_field = None
         # a pair of low quality passes no prior on: the next match searches the whole range again
         self._last = (gv.motion, dt) if gv.motion is not None and gv.quality >= PRIOR_QUALITY else None
+        if frames is not None:
+            self._blurred = frames[1]
         # integrate: the displacement is in the previous frame's axes
         c, s = np.cos(self._yaw), np.sin(self._yaw)
         step = gv.v * dt
@@ -278,6 +312,26 @@ class EgoMotion:
         self.track.append((self._time, float(self._pos[0]), float(self._pos[1]), self._yaw))
         self._prev = img
         return gv
+
+    def _tracked(self, frames: tuple[NDArray[np.float32], NDArray[np.float32]] | None, prior: GlobalMotion | None,
+                 method: str, height: float, dt: float, gyro: NDArray | None) -> tuple[GroundVelocity | None, bool]:
+        """Tracking (``direct``, ``track``): the pair's velocity from the direct alignment
+        started at the prior alone, without the block sums, and whether the track was lost.
+        None when the last block-sum pair (the anchor) is :data:`TRACK_FRAMES` pairs old or
+        more or there is no prior (not lost), or the alignment failed, moved an image corner
+        more than 3 px from the prior or left residuals more than :data:`TRACK_SPREAD` times
+        the anchor's (lost: the block sums then search the whole range, not near the prior).
+        Its quality is the anchor's, times the anchor's spread over the pair's (at most 1)."""
+        if frames is None or prior is None or self._anchor is None or self._anchor[2] >= TRACK_FRAMES - 1:
+            return None, False
+        anchor, quality, age = self._anchor
+        found, spread = refine_blurred(frames, prior, None, direct_options(frames[0].shape))
+        if found is None or not spread <= TRACK_SPREAD * anchor:
+            return None, True
+        self._anchor = (anchor, quality, age + 1)
+        motion = replace(found, method=method + "+tracked")
+        gv = ground_velocity(motion, self.camera, height, dt, gyro=gyro)
+        return replace(gv, quality=quality * min(1.0, anchor / spread), reason=""), False
 
     @property
     def frame_shape(self) -> tuple[int, ...] | None:

@@ -136,14 +136,9 @@ def _place(rng: np.random.Generator, K: FloatArray, size: tuple[int, int], n: in
     raise RuntimeError(f"could not place {n} non-overlapping markers in a {w}x{h} image")
 
 
-def _degradations(rng: np.random.Generator, difficulty: str) -> dict:
-    p = {"blur_sigma": float(rng.uniform(0.3, 0.8)), "noise_sigma": float(rng.uniform(0.0, 2.0))}
-    if difficulty == "dark":  # image mean below 30: gain * 255 + noise bias < 27
-        p["noise_sigma"] = float(rng.uniform(1.0, 3.0))
-        p["gain"] = float(rng.uniform(0.04, 0.1))
-        return p
-    if difficulty != "hard":
-        return p
+def _hard_blur(rng: np.random.Generator, p: dict) -> NDArray[np.bool_]:
+    """The degradations of a hard frame: which of six kinds apply (at least one), with the
+    first two (optical blur, motion blur) drawn into ``p``; the caller draws the others."""
     kinds = rng.random(6) < 0.5
     if not kinds.any():
         kinds[rng.integers(6)] = True
@@ -152,6 +147,18 @@ def _degradations(rng: np.random.Generator, difficulty: str) -> dict:
     if kinds[1]:
         p["motion_blur"] = float(rng.uniform(3.0, 8.0))
         p["motion_angle"] = float(rng.uniform(0.0, np.pi))
+    return kinds
+
+
+def _degradations(rng: np.random.Generator, difficulty: str) -> dict:
+    p = {"blur_sigma": float(rng.uniform(0.3, 0.8)), "noise_sigma": float(rng.uniform(0.0, 2.0))}
+    if difficulty == "dark":  # image mean below 30: gain * 255 + noise bias < 27
+        p["noise_sigma"] = float(rng.uniform(1.0, 3.0))
+        p["gain"] = float(rng.uniform(0.04, 0.1))
+        return p
+    if difficulty != "hard":
+        return p
+    kinds = _hard_blur(rng, p)
     if kinds[2]:
         p["noise_sigma"] = float(rng.uniform(4.0, 10.0))
     if kinds[3]:
@@ -186,14 +193,7 @@ def _camera_effects(rng: np.random.Generator, difficulty: str, K: FloatArray,
         p["exposure"] = float(rng.uniform(DARK_EXPOSURE[0], DARK_EXPOSURE[1]))
         p["read_noise"] = float(rng.uniform(1.0, 3.0))
     elif difficulty == "hard":
-        kinds = rng.random(6) < 0.5
-        if not kinds.any():
-            kinds[rng.integers(6)] = True
-        if kinds[0]:
-            p["blur_sigma"] = float(rng.uniform(1.0, 2.5))
-        if kinds[1]:
-            p["motion_blur"] = float(rng.uniform(3.0, 8.0))
-            p["motion_angle"] = float(rng.uniform(0.0, np.pi))
+        kinds = _hard_blur(rng, p)
         if kinds[2]:
             p["read_noise"] = float(rng.uniform(3.0, 6.0))
             p["full_well"] = float(rng.uniform(1000.0, 3000.0))

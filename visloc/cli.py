@@ -106,7 +106,20 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"visloc {__version__}")
     parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    _add_detect(sub)
+    _add_render(sub)
+    _add_flow(sub)
+    _add_localize(sub)
+    _add_track(sub)
+    _add_model(sub)
+    _add_robust(sub)
+    _add_sim(sub)
+    _add_demo(sub)
+    return parser
 
+
+def _add_detect(sub: argparse._SubParsersAction) -> None:
+    """The ``visloc detect`` sub-command's arguments."""
     d = sub.add_parser("detect", help="detect markers (and poses) in images, folders, videos or a camera")
     d.add_argument("source", help="image, folder, glob pattern, video file or camera index")
     d.add_argument("--dict", default="DICT_4X4_50", metavar="NAME|FILE",
@@ -120,14 +133,12 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--explain", metavar="DIR", help="write every detector stage's picture per frame")
     d.add_argument("--fps", type=_positive, help="frame rate for image lists (frame times)")
     d.add_argument("--max-frames", type=_count, metavar="N", help="stop after N frames")
-    d.add_argument("--fast", action="store_true", help=_FAST_HELP)
-    d.add_argument("--response", type=_response, default="srgb", metavar="srgb|linear|GAMMA", help=_RESPONSE_HELP)
-    d.add_argument("--border-bits", type=int, default=1, choices=(1, 2, 3),
-                   help="width of the markers' black border in cells (default 1)")
-    d.add_argument("--inverted", default="no", choices=("no", "yes", "both"),
-                   help="white-on-black markers: no (default), yes (only those), both")
+    _detector_arguments(d)
     d.add_argument("--quiet", action="store_true", help="no progress bar or summary")
 
+
+def _add_render(sub: argparse._SubParsersAction) -> None:
+    """The ``visloc render`` sub-command's arguments."""
     r = sub.add_parser("render", help="render synthetic data with exact ground truth")
     rs = r.add_subparsers(dest="what", metavar="WHAT", parser_class=_Parser)
     rm = rs.add_parser("markers", help="random marker scenes (images or a video) + ground_truth.json")
@@ -161,6 +172,9 @@ def build_parser() -> argparse.ArgumentParser:
     rf.add_argument("--texture", default="grass", choices=["grass", "gravel", "brick", "noise"])
     rf.add_argument("--video", action="store_true", help="write flight.mp4 instead of PNG frames")
 
+
+def _add_flow(sub: argparse._SubParsersAction) -> None:
+    """The ``visloc flow`` sub-command's arguments."""
     fl = sub.add_parser("flow", help="ground velocity of a downward camera from its frames (block flow)")
     fl.add_argument("source", help="folder, glob pattern, video file or camera index")
     fl.add_argument("--camera", required=True, metavar="FILE", help="camera file (OpenCV YAML)")
@@ -177,6 +191,9 @@ def build_parser() -> argparse.ArgumentParser:
     fl.add_argument("--max-frames", type=_count, metavar="N", help="stop after N frames")
     fl.add_argument("--quiet", action="store_true", help="no progress bar or summary")
 
+
+def _add_localize(sub: argparse._SubParsersAction) -> None:
+    """The ``visloc localize`` sub-command's arguments."""
     lz = sub.add_parser("localize", help="camera position and velocity over a marker map (pose + Kalman filter)")
     lz.add_argument("source", help="image, folder, glob pattern, video file or camera index")
     lz.add_argument("--camera", required=True, metavar="FILE", help="camera file (OpenCV YAML)")
@@ -190,14 +207,12 @@ def build_parser() -> argparse.ArgumentParser:
     lz.add_argument("--out", metavar="FILE.csv", help="write one row per frame")
     lz.add_argument("--rerun", metavar="FILE.rrd", help="write a rerun recording (estimate vs truth)")
     lz.add_argument("--max-frames", type=_count, metavar="N", help="stop after N frames")
-    lz.add_argument("--fast", action="store_true", help=_FAST_HELP)
-    lz.add_argument("--response", type=_response, default="srgb", metavar="srgb|linear|GAMMA", help=_RESPONSE_HELP)
-    lz.add_argument("--border-bits", type=int, default=1, choices=(1, 2, 3),
-                   help="width of the markers' black border in cells (default 1)")
-    lz.add_argument("--inverted", default="no", choices=("no", "yes", "both"),
-                   help="white-on-black markers: no (default), yes (only those), both")
+    _detector_arguments(lz)
     lz.add_argument("--quiet", action="store_true", help="no progress bar or summary")
 
+
+def _add_track(sub: argparse._SubParsersAction) -> None:
+    """The ``visloc track`` sub-command's arguments."""
     tk = sub.add_parser("track", help="a body's markers relative to reference markers, seen by a fixed camera")
     tk.add_argument("source", help="image, folder, glob pattern, video file or camera index")
     tk.add_argument("--camera", required=True, metavar="FILE", help="camera file (OpenCV YAML)")
@@ -211,22 +226,26 @@ def build_parser() -> argparse.ArgumentParser:
     tk.add_argument("--poles", type=float, nargs=2, default=(-4.0, -4.0), metavar="P",
                     help="velocity observer poles, 1/s (report eq. 3.14; default -4 -4)")
     tk.add_argument("--max-frames", type=_count, metavar="N", help="stop after N frames")
-    tk.add_argument("--fast", action="store_true", help=_FAST_HELP)
-    tk.add_argument("--response", type=_response, default="srgb", metavar="srgb|linear|GAMMA", help=_RESPONSE_HELP)
-    tk.add_argument("--border-bits", type=int, default=1, choices=(1, 2, 3),
-                   help="width of the markers' black border in cells (default 1)")
-    tk.add_argument("--inverted", default="no", choices=("no", "yes", "both"),
-                   help="white-on-black markers: no (default), yes (only those), both")
+    _detector_arguments(tk)
     tk.add_argument("--quiet", action="store_true", help="no progress bar or summary")
 
+
+def _add_model(sub: argparse._SubParsersAction) -> None:
+    """The ``visloc model`` sub-command's arguments."""
     md = sub.add_parser("model", help="the AR.Drone 2.0 model: identified parameters, hover trim, linear poles")
     md.add_argument("--json", action="store_true", help="print JSON instead of a table")
 
+
+def _add_robust(sub: argparse._SubParsersAction) -> None:
+    """The ``visloc robust`` sub-command's arguments."""
     rb = sub.add_parser("robust", help="robust stability of the hover controller over the propulsion box")
     rb.add_argument("--sigma", type=float, default=3.0, metavar="N",
                     help="box half-width in standard deviations of c and d (default 3)")
     rb.add_argument("--json", action="store_true", help="print JSON instead of a table")
 
+
+def _add_sim(sub: argparse._SubParsersAction) -> None:
+    """The ``visloc sim`` sub-command's arguments."""
     sm = sub.add_parser("sim", help="closed-loop simulation: model, sensors, visloc's estimators, controller")
     sm.add_argument("scenario", choices=("hover", "sidestep", "push", "hover-vision"),
                     help="hover 10 s; sidestep: 1 m in y (report Fig. 4.6); push: 4 N for 0.1 s "
@@ -249,11 +268,23 @@ def build_parser() -> argparse.ArgumentParser:
     sm.add_argument("--json", action="store_true", help="print JSON instead of a table")
     sm.add_argument("--quiet", action="store_true", help="no progress bar")
 
+
+def _add_demo(sub: argparse._SubParsersAction) -> None:
+    """The ``visloc demo`` sub-command's arguments."""
     m = sub.add_parser("demo", help="render a few frames, detect markers and poses, print a table")
     m.add_argument("--out", default="visloc-demo", metavar="DIR", help="output folder (default ./visloc-demo)")
     m.add_argument("--frames", type=_count, default=6, help="number of frames (default 6)")
     m.add_argument("--seed", type=int, default=7, help="random seed (default 7)")
-    return parser
+
+
+def _detector_arguments(p: argparse.ArgumentParser) -> None:
+    """The marker detector's options, shared by ``detect``, ``localize`` and ``track``."""
+    p.add_argument("--fast", action="store_true", help=_FAST_HELP)
+    p.add_argument("--response", type=_response, default="srgb", metavar="srgb|linear|GAMMA", help=_RESPONSE_HELP)
+    p.add_argument("--border-bits", type=int, default=1, choices=(1, 2, 3),
+                   help="width of the markers' black border in cells (default 1)")
+    p.add_argument("--inverted", default="no", choices=("no", "yes", "both"),
+                   help="white-on-black markers: no (default), yes (only those), both")
 
 
 #: options naming files or folders a command reads, and those it writes

@@ -633,32 +633,9 @@ class MarkerDetector:
             gray, corners, n_cells, per_side=4, border_error_rate=p.border_error_rate, border=bb,
             min_quiet_zone=p.min_quiet_zone, native=p.native)
         valid, bits, margin, contrast, thr = (np.array(a) for a in (valid, bits, margin, contrast, thr))
-        ids, shift, hamming, matched = decode(bits, self.dictionary, p.error_correction_rate)  # 10
-        # second reads of the candidates the first did not decode: with a threshold that
-        # follows the light across the marker (glare, shadow edges), then through the stage-7
-        # corners (a marker of about a pixel per cell can read differently through either;
-        # a refinement that spoilt the read is not trusted)
-        for use_fit, shading in ((False, True), (True, False)):
-            retry = np.flatnonzero(~(valid & matched) & (refined if use_fit else True))
-            if not len(retry):
-                continue
-            again = sample_cells(gray, quads[retry], n_cells, per_side=4) if use_fit else _take(
-                cells, retry)
-            read = read_bits(again, p.border_error_rate, border=bb, min_quiet_zone=p.min_quiet_zone,
-                             shading=shading)
-            dec = decode(read.bits, self.dictionary, p.error_correction_rate)
-            pick = read.valid & dec[3]
-            won = retry[pick]
-            if not len(won):
-                continue
-            if use_fit:
-                cells = CellSample(cells.cells.copy(), cells.ring.copy(), cells.samples.copy())
-                cells.cells[won], cells.ring[won], cells.samples[won] = (again.cells[pick], again.ring[pick],
-                                                                         again.samples[pick])
-                corners[won], refined[won] = quads[won], False  # the read vouches for those corners
-            for arr, new in zip((valid, bits, margin, contrast, thr, ids, shift, hamming, matched),
-                                (*read, *dec), strict=True):
-                arr[won] = new[pick]
+        reads = [valid, bits, margin, contrast, thr, *decode(bits, self.dictionary, p.error_correction_rate)]  # 10
+        cells = self._second_reads(gray, quads, corners, refined, cells, reads)
+        valid, bits, margin, contrast, thr, ids, shift, hamming, matched = reads
         accept = valid & matched
         confidence = np.zeros(len(quads))
         if accept.any():  # OpenCV's read of the accepted markers: cell areas, confidence, bit threshold
@@ -691,6 +668,40 @@ class MarkerDetector:
                 if c.detection is not None and id(c.detection) not in kept_ids:
                     log["candidates"][j] = replace(c, stage="duplicate")
         return dets
+
+
+    def _second_reads(self, gray: NDArray[np.uint8], quads: NDArray, corners: NDArray, refined: NDArray,
+                      cells: CellSample, reads: list[NDArray]) -> CellSample:
+        """Stages 9-10 again for the candidates the first read did not decode: with a
+        threshold that follows the light across the marker (glare, shadow edges), then
+        through the stage-7 corners ``quads`` (a marker of about a pixel per cell can read
+        differently through either; a refinement that spoilt the read is not trusted: its
+        ``corners`` and ``refined`` are put back). ``reads`` (valid, bits, margin, contrast,
+        threshold, ids, shift, hamming, matched) are updated in place where a second read
+        decodes; returns the cell samples, with those read through the stage-7 corners."""
+        p = self.params
+        bb = p.border_bits
+        n_cells = self.dictionary.marker_size + 2 * bb
+        for use_fit, shading in ((False, True), (True, False)):
+            retry = np.flatnonzero(~(reads[0] & reads[8]) & (refined if use_fit else True))
+            if not len(retry):
+                continue
+            again = sample_cells(gray, quads[retry], n_cells, per_side=4) if use_fit else _take(cells, retry)
+            read = read_bits(again, p.border_error_rate, border=bb, min_quiet_zone=p.min_quiet_zone,
+                             shading=shading)
+            dec = decode(read.bits, self.dictionary, p.error_correction_rate)
+            pick = read.valid & dec[3]
+            won = retry[pick]
+            if not len(won):
+                continue
+            if use_fit:
+                cells = CellSample(cells.cells.copy(), cells.ring.copy(), cells.samples.copy())
+                cells.cells[won], cells.ring[won], cells.samples[won] = (again.cells[pick], again.ring[pick],
+                                                                         again.samples[pick])
+                corners[won], refined[won] = quads[won], False  # the read vouches for those corners
+            for arr, new in zip(reads, (*read, *dec), strict=True):
+                arr[won] = new[pick]
+        return cells
 
 
 def _as_pass(p: object) -> SearchPass:

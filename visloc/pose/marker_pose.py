@@ -57,6 +57,47 @@ def yaw_seed_start(xy: ArrayLike, marker_length: float) -> FloatArray:
     return seeds[int(np.argmin((r * r).sum(axis=1)))]
 
 
+def _checked_corners(corners: ArrayLike) -> FloatArray:
+    """:func:`estimate_marker_pose`'s corners as (4, 2) float64, checked (its Raises)."""
+    raw = np.asarray(corners)
+    if raw.dtype.kind in "iub" and raw.dtype.itemsize < 4:
+        raise TypeError(f"corners of dtype {raw.dtype} cannot hold pixel coordinates (they wrap): pass floats")
+    c = np.asarray(corners, dtype=np.float64)
+    if c.shape != (4, 2):
+        if c.size == 8 and c.squeeze().shape == (4, 2):
+            c = c.reshape(4, 2)
+        else:
+            raise ValueError(f"corners must have shape (4, 2), got {np.shape(corners)}")
+    if not np.all(np.isfinite(c)):
+        raise ValueError(f"corners must be finite, got {c.tolist()}")
+    if not _is_proper_quadrilateral(c):
+        raise ValueError(
+            f"corners are degenerate (coincident, or three of them collinear): {c.tolist()}"
+        )
+    x, y = c[:, 0], c[:, 1]
+    if np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y) < 0:  # twice the signed area, y down
+        raise ValueError("corners run counter-clockwise in the image (a mirrored marker): the order is the "
+                         f"marker's top-left, top-right, bottom-right, bottom-left, clockwise: {c.tolist()}")
+    return c
+
+
+def _check_options(marker_length: float, camera: Camera, pixel_sigma: float | None, max_iter: int,
+                   start: str) -> None:
+    """:func:`estimate_marker_pose`'s other arguments checked (its Raises)."""
+    if isinstance(marker_length, bool) or not isinstance(marker_length, (int, float, np.number)):
+        raise TypeError(f"marker_length must be a number, got {type(marker_length).__name__}")
+    if not (math.isfinite(marker_length) and marker_length > 0):
+        raise ValueError(f"marker_length must be a finite number > 0, got {marker_length!r}")
+    if not isinstance(camera, Camera):
+        raise TypeError(f"camera must be a visloc.pose.Camera, got {type(camera).__name__}")
+    if pixel_sigma is not None and not (math.isfinite(pixel_sigma) and pixel_sigma > 0):
+        raise ValueError(f"pixel_sigma must be None or a finite number > 0, got {pixel_sigma!r}")
+    if isinstance(max_iter, bool) or int(max_iter) != max_iter or max_iter < 1:
+        raise ValueError(f"max_iter must be an integer >= 1, got {max_iter!r}")
+    if start not in STARTS:
+        raise ValueError(f"start must be one of {STARTS}, got {start!r}")
+
+
 def estimate_marker_pose(
     corners: ArrayLike,
     marker_length: float,
@@ -111,37 +152,8 @@ def estimate_marker_pose(
         ``camera`` is not a :class:`Camera`; ``marker_length`` is not a number; ``corners``
         of an integer type too narrow for pixel coordinates (8 or 16 bits).
     """
-    raw = np.asarray(corners)
-    if raw.dtype.kind in "iub" and raw.dtype.itemsize < 4:
-        raise TypeError(f"corners of dtype {raw.dtype} cannot hold pixel coordinates (they wrap): pass floats")
-    c = np.asarray(corners, dtype=np.float64)
-    if c.shape != (4, 2):
-        if c.size == 8 and c.squeeze().shape == (4, 2):
-            c = c.reshape(4, 2)
-        else:
-            raise ValueError(f"corners must have shape (4, 2), got {np.shape(corners)}")
-    if not np.all(np.isfinite(c)):
-        raise ValueError(f"corners must be finite, got {c.tolist()}")
-    if isinstance(marker_length, bool) or not isinstance(marker_length, (int, float, np.number)):
-        raise TypeError(f"marker_length must be a number, got {type(marker_length).__name__}")
-    if not (math.isfinite(marker_length) and marker_length > 0):
-        raise ValueError(f"marker_length must be a finite number > 0, got {marker_length!r}")
-    if not isinstance(camera, Camera):
-        raise TypeError(f"camera must be a visloc.pose.Camera, got {type(camera).__name__}")
-    if pixel_sigma is not None and not (math.isfinite(pixel_sigma) and pixel_sigma > 0):
-        raise ValueError(f"pixel_sigma must be None or a finite number > 0, got {pixel_sigma!r}")
-    if isinstance(max_iter, bool) or int(max_iter) != max_iter or max_iter < 1:
-        raise ValueError(f"max_iter must be an integer >= 1, got {max_iter!r}")
-    if start not in STARTS:
-        raise ValueError(f"start must be one of {STARTS}, got {start!r}")
-    if not _is_proper_quadrilateral(c):
-        raise ValueError(
-            f"corners are degenerate (coincident, or three of them collinear): {c.tolist()}"
-        )
-    x, y = c[:, 0], c[:, 1]
-    if np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y) < 0:  # twice the signed area, y down
-        raise ValueError("corners run counter-clockwise in the image (a mirrored marker): the order is the "
-                         f"marker's top-left, top-right, bottom-right, bottom-left, clockwise: {c.tolist()}")
+    c = _checked_corners(corners)
+    _check_options(marker_length, camera, pixel_sigma, max_iter, start)
     L = float(marker_length)
     max_iter = int(max_iter)
 

@@ -209,21 +209,13 @@ def simulate(
         warmup, "warmup", nonneg=True)
     _hover(vehicle, controller, sc.start_setpoint, round(lead / ctrl_dt), ctrl_dt, substeps, h)
     initial = vehicle.state.copy()
-    sensors = _Sensors(rng, cam_dt) if sc.estimator == "vision" else None
-    if sensors is not None:
-        estimator: TruthEstimator | VisionEstimator = VisionEstimator(sensors.camera, initial, g=p.g,
-                                                                      localizer=localizer)
-    elif sc.estimator == "truth":
-        estimator = TruthEstimator()
-    else:
-        raise ValueError(f"scenario.estimator: expected 'truth' or 'vision', got {sc.estimator!r}")
+    sensors, estimator = _estimator(sc, rng, cam_dt, initial, p.g, localizer)
     n = round(duration / ctrl_dt) + 1
     t_out = np.arange(n) * ctrl_dt
     states, estimates = np.full((n, 12), np.nan), np.full((n, 12), np.nan)
     setpoints, pwms = np.full((n, 4), np.nan), np.full((n, 4), np.nan)
     saturated = np.zeros(n, bool)
-    gust = np.zeros(3)
-    gust_a = math.exp(-2.0 * math.pi * 1.0 * ctrl_dt)  # 1 Hz low-pass turbulence
+    turbulence = _Turbulence(sc.gust_std, ctrl_dt, rng)
     ended: tuple[SimStatus, str] | None = None
     wall = time.perf_counter()
     k = 0
@@ -232,11 +224,7 @@ def simulate(
         for k in range(n):
             t = k * ctrl_dt
             s = vehicle.state
-            force = sc.force(t)
-            if sc.gust_std > 0.0:
-                gust = gust_a * gust + math.sqrt(1 - gust_a**2) * sc.gust_std * rng.normal(size=3)
-                gust[2] = 0.0
-                force = gust if force is None else force + gust
+            force = turbulence.add(sc.force(t))
             if sensors is not None:
                 ended = sensors.sense(t, vehicle, force, estimator, p.g)  # type: ignore[arg-type]
             else:
@@ -274,6 +262,35 @@ def simulate(
     status, reason = ended if ended is not None else _ran_out(sc, metrics, duration)
     motors = {"c": [float(v) for v in c], "d": [float(v) for v in d], "sigma": float(sigma)}
     return SimResult(sc.name, status, reason, *records[:5], records[5], metrics, motors)
+
+
+def _estimator(sc: Scenario, rng: np.random.Generator, cam_dt: float, initial: FloatArray, g: float,
+               localizer: Callable | None) -> tuple[_Sensors | None, TruthEstimator | VisionEstimator]:
+    """The scenario's sensors (None: the controller sees the true state) and estimator."""
+    if sc.estimator == "vision":
+        sensors = _Sensors(rng, cam_dt)
+        return sensors, VisionEstimator(sensors.camera, initial, g=g, localizer=localizer)
+    if sc.estimator == "truth":
+        return None, TruthEstimator()
+    raise ValueError(f"scenario.estimator: expected 'truth' or 'vision', got {sc.estimator!r}")
+
+
+class _Turbulence:
+    """Horizontal gusts: white noise of ``std`` (N) through a 1 Hz first-order low-pass,
+    drawn once per control step ``dt`` (none for ``std`` 0)."""
+
+    def __init__(self, std: float, dt: float, rng: np.random.Generator) -> None:
+        self.std, self.rng = std, rng
+        self.a = math.exp(-2.0 * math.pi * 1.0 * dt)
+        self.gust = np.zeros(3)
+
+    def add(self, force: FloatArray | None) -> FloatArray | None:
+        """``force`` (or None) with this step's gust added."""
+        if self.std <= 0.0:
+            return force
+        self.gust = self.a * self.gust + math.sqrt(1 - self.a**2) * self.std * self.rng.normal(size=3)
+        self.gust[2] = 0.0
+        return self.gust if force is None else force + self.gust
 
 
 def _at(setpoint: FloatArray) -> FloatArray:

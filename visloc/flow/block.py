@@ -38,8 +38,23 @@ MODES = ("gradient", "intensity")
 
 
 def check_pair(prev: object, curr: object) -> tuple[NDArray[np.uint8], NDArray[np.uint8]]:
-    """Both frames as grey uint8 images of the same size (at least 16 x 16), or a
-    ValueError/TypeError naming the problem."""
+    """Both frames as grey uint8 images of the same size (at least 16 x 16).
+
+    Parameters
+    ----------
+    prev, curr : ndarray (H, W) or (H, W, 3) uint8
+        Consecutive frames (BGR frames are turned grey).
+
+    Returns
+    -------
+    (ndarray (H, W) uint8, ndarray (H, W) uint8)
+        The grey frames.
+
+    Raises
+    ------
+    TypeError, ValueError
+        A frame that is not an image, of another size than the other, or smaller than 16 x 16.
+    """
     a = as_gray(prev, "prev")
     b = as_gray(curr, "curr")
     if a.shape != b.shape:
@@ -50,10 +65,21 @@ def check_pair(prev: object, curr: object) -> tuple[NDArray[np.uint8], NDArray[n
 
 
 def default_block(shape: tuple[int, ...]) -> int:
-    """Block side for frames of ``shape`` (H, W): the report's 40 px at 320 x 240, growing
-    with the fourth root of the short side above that (48 px at 640 x 480: more, smaller blocks
-    measure large frames better, see ``bench/flow.py``), at most a sixth of the short side, even,
-    in [16, 64]."""
+    """Block side for frames of ``shape``: the report's 40 px at 320 x 240, growing with the
+    fourth root of the short side above that (48 px at 640 x 480: more, smaller blocks measure
+    large frames better, see ``bench/flow.py``), at most a sixth of the short side, even, in
+    [16, 64].
+
+    Parameters
+    ----------
+    shape : tuple of int
+        ``(H, W, ...)`` of the frames, px.
+
+    Returns
+    -------
+    int
+        Block side, px.
+    """
     return _block_for(int(min(shape[:2])))
 
 

@@ -95,14 +95,33 @@ def refine_motion(prev: NDArray[np.uint8], curr: NDArray[np.uint8], motion: Glob
         return motion
     options = direct_options((h, w), stride=stride, keep=keep, iterations=iterations, tolerance=tolerance,
                              max_change=max_change, native=native)
-    found, _ = refine_blurred((blurred(prev, blur), blurred(curr, blur)), motion, prior, options)
+    found, _ = refine_blurred((blurred(prev, sigma=blur), blurred(curr, sigma=blur)), motion, prior, options)
     return motion if found is None else found
 
 
 def direct_options(shape: tuple[int, int], *, stride: int | None = None, keep: float = 0.5, iterations: int = 3,
                    tolerance: float = 0.05, max_change: float = 3.0, native: bool | None = None) -> tuple:
-    """:func:`refine_motion`'s options, checked, for frames of ``shape`` (H, W): the tuple
-    :func:`refine_blurred` takes (``stride`` None: a 120th of the short side)."""
+    """:func:`refine_motion`'s options, checked, as the tuple :func:`refine_blurred` takes.
+
+    Parameters
+    ----------
+    shape : (int, int)
+        ``(H, W)`` of the frames, px (``stride`` None: a 120th of the short side).
+    stride, keep, iterations, tolerance, max_change, native
+        As in :func:`refine_motion`.
+
+    Returns
+    -------
+    tuple
+        ``(stride, keep, iterations, tolerance, max_change, compiled)``.
+
+    Raises
+    ------
+    ValueError
+        An option out of its range.
+    RuntimeError
+        ``native=True`` but the compiled stage was not built.
+    """
     if stride is None:
         stride = max(1, round(min(shape) / 120))
     if isinstance(stride, bool) or int(stride) != stride or stride < 1 or not 0 < keep <= 1 or iterations < 1:
@@ -116,9 +135,26 @@ def direct_options(shape: tuple[int, int], *, stride: int | None = None, keep: f
 
 def refine_blurred(frames: tuple[NDArray[np.float32], NDArray[np.float32]], motion: GlobalMotion,
                    prior: GlobalMotion | None, options: tuple) -> tuple[GlobalMotion | None, float]:
-    """:func:`refine_motion` on frames already blurred (:func:`blurred`), with the options of
-    :func:`direct_options`: the refined motion (None when the alignment failed or moved too
-    far) and its residual spread (1.4826 median |r|, grey levels; inf when it failed)."""
+    """:func:`refine_motion` on frames already blurred.
+
+    Parameters
+    ----------
+    frames : (ndarray (H, W) float32, ndarray (H, W) float32)
+        The first and second frame, blurred (:func:`blurred`).
+    motion : GlobalMotion
+        The starting solution, px.
+    prior : GlobalMotion or None
+        A second start (:func:`refine_motion`).
+    options : tuple
+        From :func:`direct_options`.
+
+    Returns
+    -------
+    (GlobalMotion or None, float)
+        The refined motion (None when the alignment failed or moved too far; frames under
+        32 px on a side give None) and its residual spread, 1.4826 x the median absolute
+        residual, grey levels (inf when it failed).
+    """
     h, w = frames[0].shape
     if min(h, w) < 4 * _MARGIN:
         return None, math.inf
@@ -174,9 +210,20 @@ def _refine_from(frames: tuple[NDArray[np.float32], NDArray[np.float32]], start:
     return moved, spread
 
 
-def blurred(img: NDArray[np.uint8], sigma: float = 1.0) -> NDArray[np.float32]:
-    """``img`` as float32, blurred by a Gaussian of ``sigma`` px (none for 0): what the direct
-    alignment reads."""
+def blurred(img: NDArray[np.uint8], *, sigma: float = 1.0) -> NDArray[np.float32]:
+    """A frame as the direct alignment reads it.
+
+    Parameters
+    ----------
+    img : ndarray (H, W) uint8
+        Grey frame.
+    sigma : float
+        Gaussian blur, px (0: none; the kernel spans 2 sigma either side).
+
+    Returns
+    -------
+    ndarray (H, W) float32
+    """
     if sigma <= 0:
         return img.astype(np.float32)
     k = 2 * math.ceil(2 * sigma) + 1

@@ -49,6 +49,22 @@ def similarity_fit(field: FlowField, *, min_confidence: float = 0.2, iterations:
     Blocks are weighted by their confidence; after each fit, blocks whose residual exceeds
     3 times the robust spread (1.4826 x the median residual, at least 0.1 px) are dropped,
     until the set of blocks no longer changes.
+
+    Parameters
+    ----------
+    field : FlowField
+        Block flow (:func:`visloc.flow.block_flow`), px.
+    min_confidence : float
+        Blocks of lower confidence are left out.
+    iterations : int
+        Most weighted fits (the outliers of each dropped before the next).
+
+    Returns
+    -------
+    GlobalMotion
+        ``method`` ``"similarity"``; translation at the image centre, px; ``residual_rms``
+        over the kept blocks, px; ``inliers`` the kept blocks (0, with zero motion and a NaN
+        residual, when fewer than 3 blocks are usable).
     """
     w, h = field.image_size
     c0 = ((w - 1) / 2.0, (h - 1) / 2.0)
@@ -109,6 +125,18 @@ def instantaneous_rotation(field: FlowField, *, min_confidence: float = 0.2) -> 
     centre at infinity), or the rotation found explains the flow no better than a
     translation: then the result is the confidence-weighted mean translation, with
     ``center_of_rotation=None``.
+
+    Parameters
+    ----------
+    field : FlowField
+        Block flow (:func:`visloc.flow.block_flow`), px.
+    min_confidence : float
+        Blocks of lower confidence are left out.
+
+    Returns
+    -------
+    GlobalMotion
+        ``method`` ``"cir"``; ``center_of_rotation`` in px (image coordinates) or None.
     """
     c0 = _image_center(field)
     use = field.confidence >= min_confidence

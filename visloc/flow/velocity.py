@@ -138,7 +138,35 @@ def estimate_ground_velocity(
     :func:`visloc.flow.direct.refine_motion`, then :func:`ground_velocity` (conventions in the
     module docstring).
 
-    A texture-less pair gives ``quality`` 0 with a reason, never NaN.
+    Parameters
+    ----------
+    prev, curr : ndarray (H, W) or (H, W, 3) uint8
+        Consecutive frames of a downward camera.
+    camera : Camera
+        Its intrinsics.
+    height : float
+        Height above the ground, m (> 0).
+    dt : float
+        Time between the frames, s (> 0).
+    gyro : array_like (3,), optional
+        Body rates (wx, wy, wz), rad/s, about the camera axes (:func:`ground_velocity`).
+    method : {"similarity", "cir"}
+        Global-motion solver (:func:`global_motion`).
+    direct : bool
+        Add the sub-pixel stage.
+    **flow_options
+        Passed to :func:`block_flow`.
+
+    Returns
+    -------
+    GroundVelocity
+        Velocity in the first frame's camera axes, m/s; a texture-less pair gives ``quality``
+        0 with a reason, never NaN.
+
+    Raises
+    ------
+    ValueError
+        A bad frame pair, height or ``dt``.
     """
     _positive(height, "height")
     _positive(dt, "dt")

@@ -312,7 +312,18 @@ def _inputs(args: argparse.Namespace) -> tuple[list[Path], list[Path]]:
 def check_outputs(args: argparse.Namespace) -> None:
     """Refuse (:class:`UsageError`) an output path that is one of the command's input files,
     is or lies inside an input folder, or is a folder holding an input file (the run would
-    overwrite what it reads), or that cannot be written (checked before any work is done)."""
+    overwrite what it reads), or that cannot be written (checked before any work is done).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        A parsed command line (:func:`build_parser`).
+
+    Raises
+    ------
+    UsageError
+        Naming the output and the input it would overwrite, or why it cannot be written.
+    """
     files, folders = _inputs(args)
     for name in _OUTPUTS:
         v = getattr(args, name, None)
@@ -335,7 +346,20 @@ def check_outputs(args: argparse.Namespace) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the ``visloc`` command line; returns the exit status."""
+    """Run the ``visloc`` command line.
+
+    Parameters
+    ----------
+    argv : sequence of str, optional
+        The arguments (default ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        Exit status: 0 success, 1 some frames could not be read (or the command's own
+        meaning, e.g. ``sim``: crashed), 2 a usage or configuration problem, 3 an internal
+        error, 130 interrupted (README, "Exit status").
+    """
     parser = build_parser()
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv  # accepted anywhere on the line

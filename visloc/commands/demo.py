@@ -16,7 +16,19 @@ from visloc.pose import Camera, estimate_marker_pose, pose_error
 
 
 def demo(args: argparse.Namespace) -> int:
-    """``visloc demo``: render frames with known truth, detect, estimate poses, compare."""
+    """``visloc demo``: render frames with known truth, detect, estimate poses, compare.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed ``visloc demo`` command line (:func:`visloc.cli.build_parser`).
+
+    Returns
+    -------
+    int
+        Exit status: 0 when every check passed (markers found, flow, localisation and the
+        simulated flights within their bounds), else 1.
+    """
     import cv2
 
     from visloc.synth import MARKER_LENGTH, random_scene

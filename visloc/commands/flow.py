@@ -17,6 +17,18 @@ from visloc.pose import Camera
 
 
 def render_flow(args: argparse.Namespace) -> int:
+    """``visloc render flow``: the synthetic data and its ground truth.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed ``visloc render flow`` command line (:func:`visloc.cli.build_parser`).
+
+    Returns
+    -------
+    int
+        Exit status: 0.
+    """
     from visloc.synth.flight import render_flight, write_flight
 
     n = max(1, round(args.seconds * args.fps))
@@ -51,7 +63,18 @@ def _read_heights(path: str) -> dict[int, float]:
 FLOW_COLUMNS = ["frame", "time", "source", "vx", "vy", "speed", "yaw_rate", "quality", "reason", "x", "y", "yaw"]
 
 def flow(args: argparse.Namespace) -> int:
-    """``visloc flow``: ground velocity and integrated track of a downward camera."""
+    """``visloc flow``: ground velocity and integrated track of a downward camera.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed ``visloc flow`` command line (:func:`visloc.cli.build_parser`).
+
+    Returns
+    -------
+    int
+        Exit status: 0; 1 when some frames could not be read or lacked a height (each named on a warning line).
+    """
     from visloc.flow import EgoMotion
     from visloc.io import CsvWriter
 

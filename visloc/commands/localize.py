@@ -28,6 +28,18 @@ LOCALIZE_COLUMNS = ["frame", "time", "source", "x", "y", "z", "vx", "vy", "vz", 
                     "markers", "fix", "error_m"]
 
 def render_localize(args: argparse.Namespace) -> int:
+    """``visloc render localize``: the synthetic data and its ground truth.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed ``visloc render localize`` command line (:func:`visloc.cli.build_parser`).
+
+    Returns
+    -------
+    int
+        Exit status: 0.
+    """
     import cv2
 
     from visloc.pose.maps import GridMap
@@ -70,7 +82,18 @@ def _read_imu(path: str) -> np.ndarray:
 
 def localize(args: argparse.Namespace) -> int:
     """``visloc localize``: the camera's position over a marker map per frame, filtered by a
-    constant-velocity Kalman filter (filterpy) into position and velocity with uncertainty."""
+    constant-velocity Kalman filter (filterpy) into position and velocity with uncertainty.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed ``visloc localize`` command line (:func:`visloc.cli.build_parser`).
+
+    Returns
+    -------
+    int
+        Exit status: 0; 1 when some frames could not be read (each named on a warning line).
+    """
     from visloc.estimation.fusion import MapFixFusion
     from visloc.io import CsvWriter
     from visloc.pose.map_pose import estimate_camera_pose
@@ -146,7 +169,18 @@ def localize(args: argparse.Namespace) -> int:
 
 def track(args: argparse.Namespace) -> int:
     """``visloc track``: pose of a body relative to reference markers, per frame, with an
-    observer velocity (report eq. 3.14), as JSON lines and optionally UDP datagrams."""
+    observer velocity (report eq. 3.14), as JSON lines and optionally UDP datagrams.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed ``visloc track`` command line (:func:`visloc.cli.build_parser`).
+
+    Returns
+    -------
+    int
+        Exit status: 0; 1 when some frames could not be read (each named on a warning line).
+    """
     import json
     import socket
 

@@ -27,7 +27,18 @@ from visloc.pose import Camera, estimate_marker_pose
 
 
 def detect(args: argparse.Namespace) -> int:
-    """``visloc detect``: markers (and poses) of every frame of a source."""
+    """``visloc detect``: markers (and poses) of every frame of a source.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed ``visloc detect`` command line (:func:`visloc.cli.build_parser`).
+
+    Returns
+    -------
+    int
+        Exit status: 0; 1 when some frames could not be read (each named on a warning line).
+    """
     detector = detector_for(args)
     camera = Camera.from_file(args.camera) if args.camera else None
     if (camera is None) != (args.marker_length is None):
@@ -78,7 +89,19 @@ def detect(args: argparse.Namespace) -> int:
     return 1 if failed else 0
 
 def render(args: argparse.Namespace) -> int:
-    """``visloc render markers|flow``: a synthetic dataset with ground truth."""
+    """``visloc render markers|flow``: a synthetic dataset with ground truth.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed ``visloc render WHAT`` command line (:func:`visloc.cli.build_parser`);
+        ``what`` picks markers (here), ``flow``, ``map`` or ``localize``.
+
+    Returns
+    -------
+    int
+        Exit status: 0.
+    """
     if args.what == "flow":
         return render_flow(args)
     if args.what == "map":
@@ -108,7 +131,18 @@ MAX_MAP_PIXELS = 200_000_000
 
 
 def render_map(args: argparse.Namespace) -> int:
-    """``visloc render map``: the markers of a map drawn to scale in its z = 0 plane."""
+    """``visloc render map``: the markers of a map drawn to scale in its z = 0 plane.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed ``visloc render map`` command line (:func:`visloc.cli.build_parser`).
+
+    Returns
+    -------
+    int
+        Exit status: 0.
+    """
     import cv2
 
     from visloc.markers.dictionary import load_dictionary

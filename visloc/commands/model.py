@@ -31,7 +31,18 @@ def model_summary() -> dict:
     }
 
 def model(args: argparse.Namespace) -> int:
-    """``visloc model``: print :func:`model_summary` as a table or JSON."""
+    """``visloc model``: print :func:`model_summary` as a table or JSON.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed ``visloc model`` command line (:func:`visloc.cli.build_parser`).
+
+    Returns
+    -------
+    int
+        Exit status: 0.
+    """
     import json
 
     s = model_summary()

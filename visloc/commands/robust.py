@@ -10,7 +10,18 @@ def robust(args: argparse.Namespace) -> int:
     """``visloc robust --sigma N [--json]``: check the closed loop at every vertex of the
     propulsion-coefficient box of half-width N standard deviations (report section 4.4,
     eqs. 4.12-4.13) and search for a common Lyapunov matrix; exit status 0 when every vertex
-    is stable, 1 when one is not."""
+    is stable, 1 when one is not.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed ``visloc robust`` command line (:func:`visloc.cli.build_parser`).
+
+    Returns
+    -------
+    int
+        Exit status: 0 when every vertex is stable, 1 when one is not.
+    """
     from visloc.control.robustness import robust_summary
 
     s = robust_summary(args.sigma)

@@ -27,7 +27,18 @@ def sim(args: argparse.Namespace) -> int:
     """``visloc sim SCENARIO``: fly a scenario (:data:`visloc.sim.SCENARIOS`) in closed loop;
     print the metrics (or ``--json``), optionally write ``--out`` CSV, ``--plot`` PNG and
     ``--rerun`` recording. Exit 0 when the run settled or completed, 1 when it crashed or
-    diverged, 130 when Ctrl-C stopped it (the outputs then cover the steps flown so far)."""
+    diverged, 130 when Ctrl-C stopped it (the outputs then cover the steps flown so far).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed ``visloc sim`` command line (:func:`visloc.cli.build_parser`).
+
+    Returns
+    -------
+    int
+        Exit status: 0 settled or completed, 1 crashed or diverged, 130 interrupted.
+    """
     from visloc.sim import SimStatus, get_scenario, simulate
     from visloc.sim.output import save_plot, save_rerun, write_csv
 

@@ -131,7 +131,7 @@ def _frames(fl, camera, exposure_step, seed):
     out = []
     for k, f in enumerate(fl.frames):
         fx = replace(camera, exposure=1.2) if exposure_step and k % 2 else camera
-        out.append(apply_camera(f.astype(np.float64), fl.K, fx, rng)[0])
+        out.append(apply_camera(f.astype(np.float64), fl.K, fx, rng=rng)[0])
     return out
 
 

@@ -96,7 +96,7 @@ def camera_like(src: Path, dst: Path, seed: int) -> None:
     rng = np.random.default_rng(seed)
     for f in sorted(src.glob("frame_*.png")):
         img = cv2.imread(str(f), cv2.IMREAD_GRAYSCALE).astype(np.float64)
-        cv2.imwrite(str(dst / f.name), apply_camera(img, K, FLOW_CAMERA, rng)[0])
+        cv2.imwrite(str(dst / f.name), apply_camera(img, K, FLOW_CAMERA, rng=rng)[0])
 
 
 def errors(est: np.ndarray, truth: np.ndarray) -> dict:

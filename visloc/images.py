@@ -18,12 +18,21 @@ def _depth(top: float) -> int:
 def to_uint8(image: NDArray) -> NDArray[np.uint8]:
     """Pixel values of any depth as uint8 (the same shape).
 
-    uint8 is returned as it is. uint16 keeps the top 8 bits of the bit depth its values fit
-    in (8, 10, 12, 14 or 16 bits; for 16 bits that is ``cv2.imread``'s ``>> 8``), so 12-bit
-    sensor data in a 16-bit file spans 0..255 like 16-bit data instead of reading nearly black.
-    Floating point is taken as 0..1 when its largest value is at most 1, as 0..255 when at
-    most 255, else scaled like uint16; NaN and infinities read as 0; values are rounded and
-    clipped.
+    uint16 keeps the top 8 bits of the bit depth its values fit in (8, 10, 12, 14 or 16 bits;
+    for 16 bits that is ``cv2.imread``'s ``>> 8``), so 12-bit sensor data in a 16-bit file
+    spans 0..255 like 16-bit data instead of reading nearly black. Floating point is taken as
+    0..1 when its largest value is at most 1, as 0..255 when at most 255, else scaled like
+    uint16; NaN and infinities read as 0; values are rounded and clipped.
+
+    Parameters
+    ----------
+    image : ndarray, any shape, uint8, uint16 or floating point
+        Pixel values (grey or multi-channel alike: every value is converted on its own).
+
+    Returns
+    -------
+    ndarray, the shape of ``image``, uint8
+        Grey levels 0-255; ``image`` itself when it is already uint8.
 
     Raises
     ------
@@ -43,9 +52,21 @@ def to_uint8(image: NDArray) -> NDArray[np.uint8]:
     raise TypeError(f"unsupported pixel type {image.dtype}: expected uint8, uint16 or floating point")
 
 
-def check_image(image: object, name: str = "image") -> NDArray[np.uint8]:
-    """Check that ``image`` is a usable grey or BGR image and return it as a uint8 array
-    (uint16 and floating-point pixels converted by :func:`to_uint8`).
+def check_image(image: object, *, name: str = "image") -> NDArray[np.uint8]:
+    """Check that ``image`` is a usable grey or BGR image and return it as a uint8 array.
+
+    Parameters
+    ----------
+    image : ndarray (H, W), (H, W, 1), (H, W, 3) or (H, W, 4); uint8, uint16 or floating point
+        Grey, BGR or BGRA pixels, at least 2 x 2; uint16 and floating-point values are
+        converted by :func:`to_uint8`.
+    name : str
+        Name of the argument in error messages.
+
+    Returns
+    -------
+    ndarray, the shape of ``image``, uint8
+        ``image`` itself when it is uint8 (no copy, channels unchanged), else its conversion.
 
     Raises
     ------
@@ -71,13 +92,31 @@ def check_image(image: object, name: str = "image") -> NDArray[np.uint8]:
     return image
 
 
-def as_gray(image: object, name: str = "image") -> NDArray[np.uint8]:
-    """Return ``image`` as a contiguous ``(H, W)`` uint8 grey image.
+def as_gray(image: object, *, name: str = "image") -> NDArray[np.uint8]:
+    """Return ``image`` as a contiguous grey image.
 
     BGR (3 channels) and BGRA (4 channels) are converted with OpenCV's luma weights; a grey
     image is returned without a copy when it is already contiguous.
+
+    Parameters
+    ----------
+    image : ndarray (H, W), (H, W, 1), (H, W, 3) or (H, W, 4); uint8, uint16 or floating point
+        Grey, BGR or BGRA pixels, as :func:`check_image` accepts them.
+    name : str
+        Name of the argument in error messages.
+
+    Returns
+    -------
+    ndarray (H, W) uint8, C-contiguous
+        The grey image.
+
+    Raises
+    ------
+    TypeError, ValueError
+        As :func:`check_image`: not a numpy array, an unsupported pixel type or shape, smaller
+        than 2 x 2 pixels, or NaN / infinite pixels.
     """
-    img = check_image(image, name)
+    img = check_image(image, name=name)
     if img.ndim == 3:
         if img.shape[2] == 1:
             img = img[:, :, 0]

@@ -34,11 +34,11 @@ def test_to_gray_rejects_bad_images(bad, exc):
 def test_blur_zero_is_identity_and_blur_smooths():
     img = np.zeros((21, 21), np.uint8)
     img[10, 10] = 255
-    assert blur(img, 0) is img
-    b = blur(img, 1.0)
+    assert blur(img, sigma=0) is img
+    b = blur(img, sigma=1.0)
     assert b[10, 10] < 255 and b[10, 11] > 0 and b.sum() > 0
     with pytest.raises(ValueError, match="sigma"):
-        blur(img, -1)
+        blur(img, sigma=-1)
 
 
 def test_threshold_marks_dark_border_of_a_square_as_ink():

@@ -78,7 +78,7 @@ def test_filter_perimeter_bounds_follow_the_image_size():
     cv2.rectangle(b, (100, 100), (120, 120), 255, -1)
     cs = find_contours(b)
     assert len(filter_candidates(cs, b.shape)) == 1
-    assert filter_candidates(cs, b.shape, CandidateFilter(min_perimeter_rate=0.5)) == []
+    assert filter_candidates(cs, b.shape, params=CandidateFilter(min_perimeter_rate=0.5)) == []
 
 
 def _reference(binary, lo=1, hi=10**9):
@@ -99,7 +99,7 @@ def test_enclosing_borders_match_opencv_point_for_point(native):
               for p in (0.3, 0.5, 0.7) for _ in range(100)]
     for k, name in enumerate(["easy", "hard", "small", "empty"]):
         gray = to_gray(random_scene(k, size=(320, 240), difficulty=name).image)
-        images.append(threshold(blur(gray, 0.6), window=9, offset=7))
+        images.append(threshold(blur(gray, sigma=0.6), window=9, offset=7))
     images.append(np.full((7, 9), 255, np.uint8))  # ink everywhere, touching the image border
     images.append(np.zeros((5, 5), np.uint8))
     n_found = 0
@@ -109,7 +109,7 @@ def test_enclosing_borders_match_opencv_point_for_point(native):
         assert len(got) == len(want)
         assert all(g.dtype == np.int32 and np.array_equal(g, w) for g, w in zip(got, want, strict=True))
         n_found += len(got)
-        sub = enclosing_borders(b, 8, 40, native=native)
+        sub = enclosing_borders(b, min_len=8, max_len=40, native=native)
         assert all(np.array_equal(g, w) for g, w in zip(sub, _reference(b, 8, 40), strict=True))
     assert n_found > 100  # the comparison saw many borders
 
@@ -156,11 +156,11 @@ def test_compiled_filter_keeps_what_opencv_keeps():
     for k, name in enumerate(["easy", "hard", "small", "empty", "easy"]):
         gray = to_gray(random_scene(k, size=(320, 240), difficulty=name).image)
         for window in (5, 9, 15):
-            b = threshold(blur(gray, 0.6), window=window, offset=7)
+            b = threshold(blur(gray, sigma=0.6), window=window, offset=7)
             cs = [c.reshape(-1, 2) for c in outer_borders(b)[0]]  # texture too: most are rejected
             for params in (CandidateFilter(), CandidateFilter(approx_rate=0.03, min_solidity=0.9)):
-                want = filter_candidates(cs, b.shape, params, native=False)
-                got = filter_candidates(cs, b.shape, params, native=True)
+                want = filter_candidates(cs, b.shape, params=params, native=False)
+                got = filter_candidates(cs, b.shape, params=params, native=True)
                 assert len(got) == len(want)
                 for (c1, q1), (c2, q2) in zip(got, want, strict=True):
                     assert np.array_equal(c1, c2) and np.array_equal(q1, q2)
@@ -176,13 +176,14 @@ def test_find_candidates_is_stages_4_and_5_in_one(native):
 
     binary = threshold(random_scene(5, size=(320, 240), difficulty="easy").image, window=9, offset=7)
     params = CandidateFilter()
-    both = find_candidates(binary, params, native=native)
-    apart = filter_candidates(enclosing_borders(binary, *perimeter_bounds(binary.shape, params), native=native),
-                              binary.shape, params, native=native)
+    both = find_candidates(binary, params=params, native=native)
+    lo, hi = perimeter_bounds(binary.shape, params=params)
+    apart = filter_candidates(enclosing_borders(binary, min_len=lo, max_len=hi, native=native),
+                              binary.shape, params=params, native=native)
     assert len(both) == len(apart) > 0
     for (c1, q1), (c2, q2) in zip(both, apart, strict=True):
         assert np.array_equal(c1, c2) and np.array_equal(q1, q2)
-    assert find_candidates(np.zeros((50, 60), np.uint8), params, native=native) == []
+    assert find_candidates(np.zeros((50, 60), np.uint8), params=params, native=native) == []
 
 
 @pytest.mark.parametrize("native", _engines())
@@ -197,7 +198,7 @@ def test_a_marker_seen_edge_on_is_a_candidate(native):
     assert len(contours) == 1
     n = len(contours[0])
     assert len(cv2.approxPolyDP(contours[0], 0.05 * n, True)) < 4  # the usual tolerance spans its width
-    found = filter_candidates(contours, b.shape, CandidateFilter(), native=native)
+    found = filter_candidates(contours, b.shape, params=CandidateFilter(), native=native)
     assert len(found) == 1
     assert np.abs(np.sort(found[0][1], axis=0) - np.sort(quad, axis=0)).max() <= 2
-    assert filter_candidates(contours, b.shape, CandidateFilter(min_compactness=0.45), native=native) == []
+    assert filter_candidates(contours, b.shape, params=CandidateFilter(min_compactness=0.45), native=native) == []

@@ -66,7 +66,7 @@ def test_r_is_half_the_cord_distance():
     pendulum of length L, f = sqrt(g / L) / (2 pi)."""
     m, r, L, g = 0.4, 0.12, 1.5, 9.81
     f = math.sqrt(g / L) / (2 * math.pi)
-    assert bifilar_inertia(m, r, L, f, g) == pytest.approx(m * r**2, rel=1e-12)
+    assert bifilar_inertia(m, r, L, f, g=g) == pytest.approx(m * r**2, rel=1e-12)
 
 
 def test_bifilar_inertia_broadcasts_and_scales():

@@ -87,7 +87,7 @@ def test_quick_decode_corrects_up_to_the_family_limit(family):
         assert ok and idx == want_id[k] and d.getDistanceToId(grids[k], idx) == want_ham[k]
     got_id, got_ham, got_ok = [], [], []
     for start in range(0, len(grids), 256):  # stage 10 compares each grid with every code
-        ids, _, ham, ok = decode(grids[start : start + 256], ours, rate)
+        ids, _, ham, ok = decode(grids[start : start + 256], ours, error_correction_rate=rate)
         got_id.append(ids)
         got_ham.append(ham)
         got_ok.append(ok)

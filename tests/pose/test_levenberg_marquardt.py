@@ -28,8 +28,8 @@ def test_compiled_and_numpy_solvers_agree():
             starts[0, 2] = -1.0  # a start that puts the points behind the camera
         for max_iter in (0, 30):
             with np.errstate(invalid="ignore"):  # numpy's M of a start behind the camera
-                want = levenberg_marquardt(starts, X, xy, f, max_iter, native=False)
-            got = levenberg_marquardt(starts, X, xy, f, max_iter, native=True)
+                want = levenberg_marquardt(starts, X, xy, f, max_iter=max_iter, native=False)
+            got = levenberg_marquardt(starts, X, xy, f, max_iter=max_iter, native=True)
             finite = np.isfinite(want[1])
             assert (finite == np.isfinite(got[1])).all()
             np.testing.assert_allclose(got[0][finite], want[0][finite], rtol=0, atol=1e-9)
@@ -47,8 +47,8 @@ def test_a_parameter_without_effect_takes_the_pseudo_inverse_step():
     xy = np.array([[0.01], [0.02]])
     f = np.array([[500.0], [500.0]])
     start = np.array([[0.0, 0.0, 1.0, 0.0, 0.0, 0.0]])
-    got = levenberg_marquardt(start, X, xy, f, 10, native=True)
-    want = levenberg_marquardt(start, X, xy, f, 10, native=False)
+    got = levenberg_marquardt(start, X, xy, f, max_iter=10, native=True)
+    want = levenberg_marquardt(start, X, xy, f, max_iter=10, native=False)
     assert np.isfinite(got[0]).all() and got[1][0] < 1e-6
     np.testing.assert_allclose(got[1], want[1], atol=1e-9)
 
@@ -61,4 +61,4 @@ def test_arrays_of_the_wrong_shape_are_refused_before_the_solver(native):
     for args, word in (((np.zeros((1, 5)), X, xy, f, 5), "params"), ((np.zeros((1, 6)), X.T, xy, f, 5), "X must"),
                        ((np.zeros((1, 6)), X, xy[:, :3], f, 5), "X must"), ((np.zeros((1, 6)), X, xy, f, -1), "max_iter")):
         with pytest.raises(ValueError, match=word):
-            levenberg_marquardt(*args, native=native)
+            levenberg_marquardt(*args[:4], max_iter=args[4], native=native)

@@ -162,17 +162,17 @@ def test_vignetting_exposure_and_noise_levels():
     K = default_camera(size)
     flat = np.full((150, 200), 200.0)
     linear = {"srgb": False}
-    img, params = apply_camera(flat, K, _camera(vignetting=0.3, **linear), 0)
+    img, params = apply_camera(flat, K, _camera(vignetting=0.3, **linear), rng=0)
     assert params["vignetting"] == 0.3
     assert img[75, 100] == 200 and abs(int(img[0, 0]) - 140) <= 1  # 70 % at the far corner
-    img, _ = apply_camera(flat, K, _camera(exposure=0.5, **linear), 0)
+    img, _ = apply_camera(flat, K, _camera(exposure=0.5, **linear), rng=0)
     assert np.all(img == 100)
-    img, _ = apply_camera(flat, K, _camera(read_noise=4.0, **linear), 1)
+    img, _ = apply_camera(flat, K, _camera(read_noise=4.0, **linear), rng=1)
     assert img.std() == pytest.approx(4.0, rel=0.05)
-    img, _ = apply_camera(flat, K, _camera(full_well=1000.0, **linear), 2)
+    img, _ = apply_camera(flat, K, _camera(full_well=1000.0, **linear), rng=2)
     assert img.var() == pytest.approx(255 * 200 / 1000.0, rel=0.1)  # shot noise: var ~ signal
-    a, _ = apply_camera(flat, K, CameraEffects(), 3)
-    b, _ = apply_camera(flat, K, CameraEffects(), 3)
+    a, _ = apply_camera(flat, K, CameraEffects(), rng=3)
+    b, _ = apply_camera(flat, K, CameraEffects(), rng=3)
     np.testing.assert_array_equal(a, b)
 
 

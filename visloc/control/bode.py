@@ -37,18 +37,30 @@ def frequency_response(
     loop : str
         ``"roll"``, ``"pitch"``, ``"yaw"``, ``"height"``, ``"x"``, ``"y"``, or the aliases
         ``"attitude"`` (roll, Fig. 4.2) and ``"position"`` (x, Fig. 4.3).
-    w : ndarray (N,)
-        Frequencies, rad/s (> 0).
+    w : array_like (N,)
+        Frequencies, rad/s (finite, > 0, N >= 1).
     part : str
-        One of :data:`PARTS`.
+        One of :data:`PARTS`: ``"plant"`` ``P``, ``"controller"`` ``C``, ``"open"`` ``C P``
+        (default) or ``"closed"`` ``C P / (1 + C P)``.
     gains : ControllerGains, optional
         Default :func:`visloc.control.design_gains` of ``params``.
     params : ARDrone2Params
-        Vehicle parameters.
+        Vehicle parameters (mass, inertia, g).
 
     Returns
     -------
     ndarray (N,) complex
+        ``H(j w)`` of the curve. ``P`` is in the loop's output per unit input (rad/(N m) for
+        roll, pitch and yaw, m/N for height, m/(N m) for x and y), ``C`` in its inverse (see
+        :class:`visloc.control.LoopGains`); ``C P`` and the closed loop are dimensionless.
+
+    Raises
+    ------
+    ValueError
+        Unknown ``loop`` or ``part``; ``w`` None, not 1-D, empty, not finite or not > 0.
+    TypeError
+        ``loop`` not a str, ``gains`` not a :class:`ControllerGains`, ``params`` not an
+        :class:`ARDrone2Params`.
     """
     check_params(params)
     if part not in PARTS:
@@ -98,11 +110,12 @@ def bode(
     part : str
         ``"plant"``, ``"controller"``, ``"open"`` (default) or ``"closed"``.
     w : array_like (N,), optional
-        Frequencies, rad/s; default 600 points log-spaced over 0.01-1000 rad/s.
+        Frequencies, rad/s (finite, > 0, N >= 2); default 600 points log-spaced over
+        0.01-1000 rad/s.
     gains : ControllerGains, optional
         Default :func:`visloc.control.design_gains` of ``params``.
     params : ARDrone2Params
-        Vehicle parameters.
+        Vehicle parameters (mass, inertia, g).
 
     Returns
     -------
@@ -113,6 +126,11 @@ def bode(
     phase_deg : ndarray (N,)
         Unwrapped phase, degrees, on the branch that starts in (-300, 60] (so a double
         integrator reads -180, not +180).
+
+    Raises
+    ------
+    ValueError, TypeError
+        As for :func:`frequency_response` (``w`` here needs at least 2 frequencies).
     """
     freqs = _frequencies(w)
     h = frequency_response(loop, freqs, part=part, gains=gains, params=params)
@@ -132,12 +150,28 @@ def loop_margins(
     The crossover is the highest frequency where ``|C P| = 1``, refined by bisection on a
     dense log grid; the phase margin is ``180 + arg(C P)`` there, wrapped to (-180, 180].
 
+    Parameters
+    ----------
+    loop : str
+        See :func:`frequency_response`.
+    gains : ControllerGains, optional
+        Default :func:`visloc.control.design_gains` of ``params``.
+    params : ARDrone2Params
+        Vehicle parameters (mass, inertia, g).
+
     Returns
     -------
     crossover : float
         rad/s.
     phase_margin : float
         Degrees.
+
+    Raises
+    ------
+    ValueError
+        ``loop`` has no gain crossover between 1e-3 and 1e4 rad/s, or is unknown.
+    TypeError
+        As for :func:`frequency_response`.
     """
     w = np.logspace(-3, 4, 20000)
     mag = np.abs(frequency_response(loop, w, gains=gains, params=params))
@@ -171,11 +205,25 @@ def save_bode_png(
     path : str or PathLike
         Output file (``.png``).
     loops : tuple of str
-        Loops to draw side by side; default the report's Figures 4.2 and 4.3.
+        Loops to draw side by side (names as for :func:`frequency_response`); default the
+        report's Figures 4.2 and 4.3.
     gains : ControllerGains, optional
         Default :func:`visloc.control.design_gains` of ``params``.
     params : ARDrone2Params
-        Vehicle parameters.
+        Vehicle parameters (mass, inertia, g).
+
+    Returns
+    -------
+    None
+        The figure is written to ``path``.
+
+    Raises
+    ------
+    ImportError
+        matplotlib is not installed.
+    ValueError
+        ``loops`` is a str or empty, names an unknown loop, or a loop has no gain crossover
+        (:func:`loop_margins`).
     """
     try:
         from matplotlib.backends.backend_agg import FigureCanvasAgg

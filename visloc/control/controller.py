@@ -24,7 +24,18 @@ _POSITION_COLUMNS = np.r_[0:6, 12:16]  # x_P..w_P and the integrals: the "set-po
 
 
 def wrap_angle(angle: float) -> float:
-    """``angle`` (rad) wrapped to [-pi, pi)."""
+    """``angle`` wrapped to [-pi, pi).
+
+    Parameters
+    ----------
+    angle : float
+        Angle, rad.
+
+    Returns
+    -------
+    float
+        The same angle modulo ``2 pi``, rad, in [-pi, pi).
+    """
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 

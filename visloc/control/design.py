@@ -183,7 +183,25 @@ class ControllerGains:
 
 
 def loop_name(loop: str) -> str:
-    """Canonical loop name; raises ``ValueError`` naming ``loop`` if unknown."""
+    """Canonical loop name.
+
+    Parameters
+    ----------
+    loop : str
+        One of :data:`LOOPS` or an alias of :data:`LOOP_ALIASES`.
+
+    Returns
+    -------
+    str
+        The name in :data:`LOOPS` (aliases resolved).
+
+    Raises
+    ------
+    TypeError
+        ``loop`` is not a str.
+    ValueError
+        ``loop`` is neither a loop nor an alias.
+    """
     if not isinstance(loop, str):
         raise TypeError(f"loop: expected a str, got {type(loop).__name__}")
     name = LOOP_ALIASES.get(loop, loop)
@@ -201,14 +219,26 @@ def plant(loop: str, params: ARDrone2Params, gains: ControllerGains | None = Non
     loop : str
         One of :data:`LOOPS` (or ``"attitude"`` / ``"position"``).
     params : ARDrone2Params
-        Vehicle parameters.
+        Vehicle parameters (mass, inertia, g).
     gains : ControllerGains, optional
         Needed for ``"x"`` and ``"y"``: the attitude gains close the inner loop (Fig. 4.3).
 
     Returns
     -------
-    num, den : ndarray
-        ``P(s) = num(s) / den(s)`` with the loop's sign made positive.
+    num : ndarray (1,)
+        ``[1]``, or ``[g]`` (m/s^2) for x and y.
+    den : ndarray (3,) or (5,)
+        ``[J, 0, 0]`` (``Ixx``, ``Iyy``, ``Izz`` in kg m^2, or the mass in kg for height), or
+        ``s^2 (I s^2 + kd s + kp)`` for x and y (pitch's ``Iyy`` and gains for x, roll's
+        for y). ``P(s) = num(s) / den(s)`` with the loop's sign made positive, in rad/(N m)
+        (roll, pitch, yaw), m/N (height) or m/(N m) (x, y).
+
+    Raises
+    ------
+    ValueError
+        Unknown ``loop``, or ``gains`` None for ``"x"`` or ``"y"``.
+    TypeError
+        ``loop`` is not a str or ``params`` not an :class:`ARDrone2Params`.
     """
     p = check_params(params)
     name = loop_name(loop)
@@ -233,20 +263,23 @@ def design_loop(num: FloatArray, den: FloatArray, spec: LoopSpec) -> LoopGains:
 
     Parameters
     ----------
-    num, den : ndarray
-        Plant polynomials (see :func:`plant`).
+    num, den : ndarray (n,), (m,)
+        Plant polynomial coefficients, highest power first (see :func:`plant`).
     spec : LoopSpec
         Crossover (rad/s), phase margin (deg) and integral corner ratio.
 
     Returns
     -------
     LoopGains
+        ``kp, kd, ki`` in the loop's units (see :class:`LoopGains`).
 
     Raises
     ------
     ValueError
         If a PID cannot meet the spec (more than 90 degrees of lead needed) or the closed
         loop it gives is unstable.
+    TypeError
+        ``spec`` is not a :class:`LoopSpec`.
     """
     if not isinstance(spec, LoopSpec):
         raise TypeError(f"spec: expected LoopSpec, got {type(spec).__name__}")
@@ -283,6 +316,14 @@ def design_gains(params: ARDrone2Params, specs: ControlSpecs | None = None) -> C
     Returns
     -------
     ControllerGains
+        The six loops' gains, with ``specs`` recorded.
+
+    Raises
+    ------
+    TypeError
+        ``params`` is not an :class:`ARDrone2Params` or ``specs`` not a :class:`ControlSpecs`.
+    ValueError
+        A loop's specification cannot be met (:func:`design_loop`).
     """
     p = check_params(params)
     s = ControlSpecs() if specs is None else specs
@@ -296,9 +337,27 @@ def design_gains(params: ARDrone2Params, specs: ControlSpecs | None = None) -> C
 
 
 def augmented_model(params: ARDrone2Params) -> tuple[FloatArray, FloatArray]:
-    """``(A, B)`` (16, 16), (16, 4): the pilot-frame model with the integrated errors (§4.2.3).
+    """The pilot-frame linear model at hover with the integrated errors appended (§4.2.3).
 
-    The last four states integrate ``x_P, y_P, z_P`` and ``psi`` (:data:`INTEGRAL_STATE_NAMES`).
+    Parameters
+    ----------
+    params : ARDrone2Params
+        Vehicle parameters (mass, inertia, g).
+
+    Returns
+    -------
+    A : ndarray (16, 16)
+        :func:`visloc.control.linearize_analytical`'s ``A`` for the 12 states of
+        :data:`visloc.control.PILOT_STATE_NAMES`; the last four states integrate ``x_P, y_P,
+        z_P`` and ``psi`` (:data:`INTEGRAL_STATE_NAMES`, m s and rad s).
+    B : ndarray (16, 4)
+        Input matrix for ``u = [T, tau_x, tau_y, tau_z]`` (deviation from hover, N and
+        N m); zero rows for the integrals.
+
+    Raises
+    ------
+    TypeError
+        ``params`` is not an :class:`ARDrone2Params`.
     """
     a, b = linearize_analytical(params)
     aa = np.zeros((16, 16))
@@ -331,7 +390,15 @@ def lqr_gains(
     Returns
     -------
     ndarray (4, 16) or (4, 12)
-        ``K`` of ``u = -K x``.
+        ``K`` of ``u = -K x``: rows ``[T, tau_x, tau_y, tau_z]`` (deviation from hover, N
+        and N m), columns the states of :func:`augmented_model`.
+
+    Raises
+    ------
+    ValueError
+        ``q`` or ``r`` of the wrong shape.
+    TypeError
+        ``params`` is not an :class:`ARDrone2Params`.
     """
     a, b = augmented_model(params)
     n = 16 if integral else 12

@@ -42,7 +42,18 @@ INPUT_NAMES: tuple[str, ...] = ("T", "tau_x", "tau_y", "tau_z")
 
 
 def yaw_rotation(psi: float) -> FloatArray:
-    """``R_psi`` (3, 3), the rotation about z by the heading ``psi`` (rad) (report eq. 4.2)."""
+    """``R_psi``, the rotation about z by the heading ``psi`` (report eq. 4.2).
+
+    Parameters
+    ----------
+    psi : float
+        Heading, rad.
+
+    Returns
+    -------
+    ndarray (3, 3)
+        ``R_psi``: maps pilot-frame vectors into the inertial frame A, ``v_A = R_psi v_P``.
+    """
     c, s = math.cos(psi), math.sin(psi)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])  # report eq. (4.2)
 
@@ -52,17 +63,26 @@ def to_pilot(state: ArrayLike, psi: float, origin: ArrayLike | None = None) -> F
 
     Parameters
     ----------
-    state : ndarray (12,)
+    state : array_like (12,)
         Model state in A: ``[x, y, z, u, v, w, phi, theta, psi, p, q, r]`` (m, m/s, rad, rad/s).
     psi : float
         Heading of the pilot frame, rad.
-    origin : ndarray (3,), optional
+    origin : array_like (3,), optional
         Point of A taken as the pilot frame's origin, m (default: A's origin).
 
     Returns
     -------
     ndarray (12,)
-        ``[R^T (xi - origin), R^T nu, phi, theta, psi, p, q, r]`` with ``R = R_psi``.
+        ``[R^T (xi - origin), R^T nu, phi, theta, psi, p, q, r]`` with ``R = R_psi``: position
+        (m) and velocity (m/s) in pilot axes, the angles and rates unchanged.
+
+    Raises
+    ------
+    TypeError
+        ``psi`` not a real number, or ``state`` / ``origin`` not real numbers.
+    ValueError
+        ``psi`` not finite; ``state`` not (12,) or ``origin`` not (3,), or a NaN or infinite
+        entry in them.
     """
     rt = yaw_rotation(check_real(psi, "psi")).T
     out = as_array(state, "state", (12,)).copy()
@@ -73,7 +93,29 @@ def to_pilot(state: ArrayLike, psi: float, origin: ArrayLike | None = None) -> F
 
 
 def from_pilot(state_p: ArrayLike, psi: float, origin: ArrayLike | None = None) -> FloatArray:
-    """Inverse of :func:`to_pilot`: a pilot-frame state (12,) back into the inertial frame A."""
+    """Inverse of :func:`to_pilot`: a pilot-frame state back into the inertial frame A.
+
+    Parameters
+    ----------
+    state_p : array_like (12,)
+        Pilot-frame state ``[x_P, y_P, z_P, u_P, v_P, w_P, phi, theta, psi, p, q, r]`` (m, m/s,
+        rad, rad/s; :data:`PILOT_STATE_NAMES`).
+    psi : float
+        Heading of the pilot frame, rad.
+    origin : array_like (3,), optional
+        Point of A that is the pilot frame's origin, m (default: A's origin).
+
+    Returns
+    -------
+    ndarray (12,)
+        ``[R xi_P + origin, R nu_P, phi, theta, psi, p, q, r]`` with ``R = R_psi``: the model
+        state in A (:data:`visloc.model.STATE_NAMES`).
+
+    Raises
+    ------
+    TypeError, ValueError
+        As for :func:`to_pilot`.
+    """
     r = yaw_rotation(check_real(psi, "psi"))
     out = as_array(state_p, "state_p", (12,)).copy()
     offset = np.zeros(3) if origin is None else as_array(origin, "origin", (3,))
@@ -83,7 +125,23 @@ def from_pilot(state_p: ArrayLike, psi: float, origin: ArrayLike | None = None) 
 
 
 def hover_input(params: ARDrone2Params) -> FloatArray:
-    """Hover trim ``u0 = [m g, 0, 0, 0]`` (4,), N and N m (report section 4.1: ``T0 = m g``)."""
+    """Hover trim ``u0 = [m g, 0, 0, 0]`` (report section 4.1: ``T0 = m g``).
+
+    Parameters
+    ----------
+    params : ARDrone2Params
+        Vehicle parameters (mass, g).
+
+    Returns
+    -------
+    ndarray (4,)
+        ``[T, tau_x, tau_y, tau_z]``: thrust in N, torques in N m.
+
+    Raises
+    ------
+    TypeError
+        ``params`` is not an :class:`ARDrone2Params`.
+    """
     p = check_params(params)
     return np.array([p.mass * p.g, 0.0, 0.0, 0.0])  # report section 4.1: T0 = m g
 
@@ -118,6 +176,13 @@ def linearize_numerical(
         ``d xdot_P / d x_P`` (state order :data:`PILOT_STATE_NAMES`), 1/s or per-unit rates.
     B : ndarray (12, 4)
         ``d xdot_P / d u`` (input order :data:`INPUT_NAMES`).
+
+    Raises
+    ------
+    TypeError
+        ``params`` is not an :class:`ARDrone2Params`; ``psi0`` or ``step`` not a real number.
+    ValueError
+        ``psi0`` not finite, or ``step`` not finite and > 0.
     """
     p = check_params(params)
     psi0 = check_real(psi0, "psi0")
@@ -153,8 +218,17 @@ def linearize_analytical(params: ARDrone2Params) -> tuple[FloatArray, FloatArray
     Returns
     -------
     A : ndarray (12, 12)
+        ``d xdot_P / d x_P`` in state order :data:`PILOT_STATE_NAMES`: ones for the
+        kinematics, ``-g`` from ``theta`` to ``udot_P`` and ``+g`` from ``phi`` to ``vdot_P``
+        (m/s^2 per rad).
     B : ndarray (12, 4)
-        State order :data:`PILOT_STATE_NAMES`, input order :data:`INPUT_NAMES`.
+        ``d xdot_P / d u`` in input order :data:`INPUT_NAMES`: ``-1/m`` (1/kg) from the thrust
+        to ``wdot_P``, ``1/Ixx, 1/Iyy, 1/Izz`` (1/(kg m^2)) from the torques to the rates.
+
+    Raises
+    ------
+    TypeError
+        ``params`` is not an :class:`ARDrone2Params`.
     """
     p = check_params(params)
     t0 = p.mass * p.g  # report section 4.1: T0 = m g
@@ -196,7 +270,15 @@ def mixer_input_matrix(
     Returns
     -------
     ndarray (12, 4)
-        Per unit of ``pwm_bar`` (%^2).
+        ``d xdot_P / d pwm_bar`` of motors 1-4, state order :data:`PILOT_STATE_NAMES`: per
+        unit of ``pwm_bar`` (%^2).
+
+    Raises
+    ------
+    TypeError
+        ``params`` is not an :class:`ARDrone2Params`; ``arm``, ``c`` or ``d`` not real numbers.
+    ValueError
+        ``arm`` not finite and > 0; ``c`` or ``d`` not (4,), not finite or not > 0.
     """
     p = check_params(params)
     _, b = linearize_analytical(p)
@@ -224,7 +306,13 @@ def pwm_input_matrix(
     Returns
     -------
     ndarray (12, 4)
-        Per percent of motor command.
+        ``d xdot_P / d pwm`` of motors 1-4, state order :data:`PILOT_STATE_NAMES`: per
+        percent of motor command.
+
+    Raises
+    ------
+    TypeError, ValueError
+        As for :func:`mixer_input_matrix`.
     """
     p = check_params(params)
     slope = 2.0 * (hover_pwm(p) + p.k)  # d (pwm + k)^2 / d pwm at the trim, %

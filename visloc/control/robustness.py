@@ -91,7 +91,24 @@ class VertexResult:
 
 
 def max_sigma(params: ARDrone2Params = ARDRONE2) -> float:
-    """Largest ``n`` for which every perturbed coefficient stays positive (eqs. 4.12-4.13)."""
+    """Largest ``n`` for which every perturbed coefficient stays positive (eqs. 4.12-4.13).
+
+    Parameters
+    ----------
+    params : ARDrone2Params
+        Vehicle parameters (``c_mean, c_std, d_mean, d_std``).
+
+    Returns
+    -------
+    float
+        ``min(c_mean / c_std, d_mean / d_std)``, in standard deviations (a ratio with a zero
+        standard deviation counts as infinite; ``inf`` when both are zero).
+
+    Raises
+    ------
+    TypeError
+        ``params`` is not an :class:`ARDrone2Params`.
+    """
     p = check_params(params)
     limits = [p.c_mean / p.c_std if p.c_std > 0 else math.inf,
               p.d_mean / p.d_std if p.d_std > 0 else math.inf]
@@ -121,7 +138,7 @@ def closed_loop_vertices(
     Parameters
     ----------
     n_sigma : float
-        ``n`` of ``-n <= r_i, s_i <= n`` (>= 0).
+        ``n`` of ``-n <= r_i, s_i <= n``, standard deviations (>= 0, < :func:`max_sigma`).
     params : ARDrone2Params
         Vehicle parameters (means and standard deviations of ``c`` and ``d``).
     gains : ControllerGains, optional
@@ -134,8 +151,19 @@ def closed_loop_vertices(
     Returns
     -------
     matrices : ndarray (256, n, n)
+        ``A - B(delta) K`` of each vertex, ``n = 16`` with ``integral`` else 12; states in the
+        order of :data:`visloc.control.PILOT_STATE_NAMES` then
+        :data:`visloc.control.INTEGRAL_STATE_NAMES`.
     ratios : ndarray (256, 8)
-        ``(r_1..r_4, s_1..s_4)`` of each vertex.
+        ``(r_1..r_4, s_1..s_4)`` of each vertex, standard deviations (each ``+- n_sigma``).
+
+    Raises
+    ------
+    ValueError
+        ``n_sigma`` negative, not finite or not below :func:`max_sigma`; ``arm`` not > 0.
+    TypeError
+        ``params`` is not an :class:`ARDrone2Params`, ``gains`` not a
+        :class:`ControllerGains`, ``n_sigma`` or ``arm`` not a real number.
     """
     p = check_params(params)
     n = _check_sigma(n_sigma, p)
@@ -163,7 +191,8 @@ def vertex_stability(matrices: FloatArray) -> tuple[bool, float, int]:
 
     Parameters
     ----------
-    matrices : ndarray (N, n, n)
+    matrices : array_like (N, n, n)
+        N >= 1 state matrices of ``x' = A x`` (e.g. :func:`closed_loop_vertices`).
 
     Returns
     -------
@@ -173,6 +202,13 @@ def vertex_stability(matrices: FloatArray) -> tuple[bool, float, int]:
         Largest real part over all matrices, 1/s.
     worst : int
         Index of the matrix that has it.
+
+    Raises
+    ------
+    TypeError
+        ``matrices`` are not real numbers.
+    ValueError
+        ``matrices`` not (N, n, n) with N >= 1, or not finite.
     """
     m = _as_stack(matrices)
     per = np.array([np.max(np.linalg.eigvals(a).real) for a in m])
@@ -189,8 +225,8 @@ def common_lyapunov(matrices: FloatArray, *, solver: str | None = None) -> Lyapu
 
     Parameters
     ----------
-    matrices : ndarray (N, n, n)
-        The polytope's vertices.
+    matrices : array_like (N, n, n)
+        The polytope's vertices (e.g. :func:`closed_loop_vertices`), N >= 1.
     solver : str, optional
         cvxpy solver name. By default SCS (first order: 2-7 s for the 256 vertices of the
         16-state loop here) with at most 1000 iterations, then Clarabel (interior point,
@@ -199,6 +235,13 @@ def common_lyapunov(matrices: FloatArray, *, solver: str | None = None) -> Lyapu
     Returns
     -------
     LyapunovResult
+        ``"feasible"`` with the certificate ``P`` (n, n), ``"infeasible"``, or
+        ``"unavailable"`` without cvxpy (no exception then).
+
+    Raises
+    ------
+    TypeError, ValueError
+        As for :func:`vertex_stability`.
     """
     m = _as_stack(matrices)
     try:
@@ -264,6 +307,13 @@ def vertex_check(
     Returns
     -------
     VertexResult
+        Vertex count, stability, largest real eigenvalue part (1/s), the worst vertex and,
+        with ``lyapunov``, the LMI's status.
+
+    Raises
+    ------
+    TypeError, ValueError
+        As for :func:`closed_loop_vertices`.
     """
     mats, ratios = closed_loop_vertices(n_sigma, params=params, gains=gains, arm=arm,
                                         integral=integral)
@@ -294,12 +344,6 @@ def largest_sigma(
     tol : float
         Bisection tolerance in standard deviations (> 0).
 
-    Notes
-    -----
-    ``"vertex"`` takes a fraction of a second. ``"lyapunov"`` first bisects the vertex
-    check (a common ``P`` needs stable vertices) and then solves one LMI per step, 2-15 s
-    each: a few minutes at ``tol=0.01``.
-
     Returns
     -------
     float
@@ -311,7 +355,16 @@ def largest_sigma(
     Raises
     ------
     ValueError
-        If ``test`` is unknown, or ``"lyapunov"`` without cvxpy installed.
+        If ``test`` is unknown, or ``"lyapunov"`` without cvxpy installed; ``tol`` not finite
+        and > 0; ``arm`` not > 0.
+    TypeError
+        ``tol`` not a real number; ``params`` or ``gains`` of the wrong type.
+
+    Notes
+    -----
+    ``"vertex"`` takes a fraction of a second. ``"lyapunov"`` first bisects the vertex
+    check (a common ``P`` needs stable vertices) and then solves one LMI per step, 2-15 s
+    each: a few minutes at ``tol=0.01``.
     """
     if test not in TESTS:
         raise ValueError(f"test: expected one of {TESTS}, got {test!r}")
@@ -363,6 +416,13 @@ def robust_summary(n_sigma: float, *, params: ARDrone2Params = ARDRONE2,
         ``lyapunov`` (``"feasible"`` / ``"infeasible"`` / ``"unavailable"``), plus
         ``n_sigma``, ``arm_m`` and ``states`` (16: the 12 pilot-frame states and 4
         integrals) for the record.
+
+    Raises
+    ------
+    ValueError
+        ``n_sigma`` negative, not finite or not below :func:`max_sigma`; ``arm`` not > 0.
+    TypeError
+        ``params`` is not an :class:`ARDrone2Params`; ``n_sigma`` or ``arm`` not a real number.
     """
     p = check_params(params)
     d_arm = resolve_arm(p, arm)

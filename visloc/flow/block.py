@@ -55,8 +55,8 @@ def check_pair(prev: object, curr: object) -> tuple[NDArray[np.uint8], NDArray[n
     TypeError, ValueError
         A frame that is not an image, of another size than the other, or smaller than 16 x 16.
     """
-    a = as_gray(prev, "prev")
-    b = as_gray(curr, "curr")
+    a = as_gray(prev, name="prev")
+    b = as_gray(curr, name="curr")
     if a.shape != b.shape:
         raise ValueError(f"prev and curr must have the same size, got {a.shape[::-1]} and {b.shape[::-1]} (W, H)")
     if min(a.shape) < 16:

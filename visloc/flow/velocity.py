@@ -292,7 +292,7 @@ class EgoMotion:
         """
         from visloc.images import as_gray
 
-        img = as_gray(image, "image")
+        img = as_gray(image, name="image")
         if self._prev is None:
             self._prev = img
             self.track.append((0.0, 0.0, 0.0, 0.0))

@@ -12,15 +12,41 @@ __all__ = ["Closing", "commit_staged", "staged_path"]
 
 
 def staged_path(path: Path) -> Path:
-    """Where an output file is written until it is complete: ``dir/.name.partial.ext`` next to
-    ``path`` (the extension kept for codecs and formats that go by it). An earlier file at
-    ``path`` stays as it is until :func:`commit_staged`."""
+    """Where an output file is written until it is complete.
+
+    An earlier file at ``path`` stays as it is until :func:`commit_staged`.
+
+    Parameters
+    ----------
+    path : Path
+        The output file.
+
+    Returns
+    -------
+    Path
+        ``dir/.name.partial.ext`` next to ``path`` (the extension kept for codecs and formats
+        that go by it).
+    """
     return path.with_name(f".{path.name}.partial{path.suffix}")
 
 
-def commit_staged(staged: Path, path: Path, keep: bool) -> None:
-    """Rename the staged file over ``path`` when ``keep`` (something was written: an
-    interrupted run keeps its frames), else remove it and leave ``path`` untouched."""
+def commit_staged(staged: Path, path: Path, *, keep: bool) -> None:
+    """Put a staged file in place, or drop it.
+
+    Parameters
+    ----------
+    staged : Path
+        The staged file (:func:`staged_path`); it may be missing.
+    path : Path
+        The output file.
+    keep : bool
+        Rename ``staged`` over ``path`` (something was written: an interrupted run keeps its
+        frames); else remove it and leave ``path`` untouched.
+
+    Returns
+    -------
+    None
+    """
     if keep and staged.exists():
         os.replace(staged, path)
     else:

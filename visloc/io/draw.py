@@ -39,7 +39,7 @@ def _pt(point: NDArray[np.float64]) -> tuple[int, int]:
 
 
 def _to_bgr(image: object) -> NDArray[np.uint8]:
-    img = check_image(image, "image")
+    img = check_image(image, name="image")
     if img.ndim == 2:
         return cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
     if img.shape[2] == 1:
@@ -131,7 +131,8 @@ def draw_markers(
     image : ndarray (H, W) or (H, W, 3) uint8
         Grey or BGR image (BGRA is accepted, alpha dropped); it is not modified.
     detections : sequence of MarkerDetection
-        Markers to draw (anything with ``id`` and ``corners`` (4, 2)).
+        Markers to draw (anything with ``id`` and ``corners`` (4, 2): ``(x, y)`` px, pixel
+        centres at integer coordinates, corner 0 the marker's own top-left).
     poses : sequence of Pose or None, optional
         One entry per detection (``None`` for markers without a pose); anything with ``R``
         (3, 3) and ``t`` (3,) mapping marker points into the camera frame.

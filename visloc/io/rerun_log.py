@@ -48,7 +48,7 @@ _HALF_PIXEL = 0.5  # rerun: centre of pixel (0, 0) is at (0.5, 0.5)
 
 
 def _rgb(image: object) -> NDArray[np.uint8]:
-    img = check_image(image, "image")
+    img = check_image(image, name="image")
     if img.ndim == 3 and img.shape[2] == 1:
         return img[:, :, 0]
     if img.ndim == 3 and img.shape[2] == 3:
@@ -219,7 +219,8 @@ class RerunLogger(Closing):
         rec.set_time("time", duration=float(time))
         if image is not None:
             img = rr.Image(_rgb(image))
-            rec.log("camera/image", img if self.jpeg_quality is None else img.compress(jpeg_quality=int(self.jpeg_quality)))
+            rec.log("camera/image",
+                    img if self.jpeg_quality is None else img.compress(jpeg_quality=int(self.jpeg_quality)))
         return rec
 
     def log_flow(
@@ -339,5 +340,5 @@ class RerunLogger(Closing):
         self._closed = True
         self.recording.flush()
         self.recording.disconnect()
-        commit_staged(staged_path(self.path), self.path, True)
+        commit_staged(staged_path(self.path), self.path, keep=True)
 

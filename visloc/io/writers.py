@@ -43,6 +43,18 @@ def to_jsonable(obj: Any, _where: str = "obj") -> Any:
     become dicts, mapping keys become strings, and non-finite floats (NaN, inf) become ``None``
     so the output is strict JSON.
 
+    Parameters
+    ----------
+    obj : object
+        The value to convert.
+    _where : str
+        Internal: the location of ``obj`` named in error messages.
+
+    Returns
+    -------
+    None, bool, int, float, str, list or dict
+        The value in plain JSON types (nested lists and dicts with str keys).
+
     Raises
     ------
     TypeError
@@ -96,7 +108,7 @@ def _close_text(file: TextIO, path: Path, count: int) -> None:
     """Close a staged text file and put it in place when it holds a record."""
     if not file.closed:
         file.close()
-        commit_staged(staged_path(path), path, count > 0)
+        commit_staged(staged_path(path), path, keep=count > 0)
 
 
 class JsonlWriter(Closing):
@@ -327,7 +339,7 @@ class AnnotationSink(Closing):
         """
         if self._closed:
             raise ValueError(f"cannot write to closed AnnotationSink({self.target})")
-        img = check_image(image, "image")
+        img = check_image(image, name="image")
         if img.ndim == 3 and img.shape[2] == 4:
             img = img[:, :, :3]
         elif img.ndim == 3 and img.shape[2] == 1:
@@ -372,5 +384,5 @@ class AnnotationSink(Closing):
             self._writer.release()
             self._writer = None
         if self.is_video and not self._closed:
-            commit_staged(staged_path(self.target), self.target, self.count > 0)
+            commit_staged(staged_path(self.target), self.target, keep=self.count > 0)
         self._closed = True

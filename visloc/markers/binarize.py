@@ -17,15 +17,49 @@ __all__ = ["blur", "default_window", "threshold", "to_gray"]
 
 
 def to_gray(image: NDArray[np.uint8]) -> NDArray[np.uint8]:
-    """Stage 1: a uint8 grey or BGR image as a contiguous ``(H, W)`` uint8 grey image."""
-    return as_gray(image, "image")
+    """Stage 1: the image as a grey image (:func:`visloc.images.as_gray`).
+
+    Parameters
+    ----------
+    image : ndarray (H, W) or (H, W, 3) uint8
+        Grey or BGR image ((H, W, 1), BGRA (H, W, 4), uint16 and floating point are accepted
+        and converted as :func:`visloc.images.as_gray` does).
+
+    Returns
+    -------
+    ndarray (H, W) uint8, C-contiguous
+        The grey image (``image`` itself when it is already contiguous grey uint8).
+
+    Raises
+    ------
+    TypeError, ValueError
+        If ``image`` is not a usable image (:func:`visloc.images.check_image`).
+    """
+    return as_gray(image, name="image")
 
 
-def blur(gray: NDArray[np.uint8], sigma: float = 0.6) -> NDArray[np.uint8]:
-    """Stage 2: Gaussian blur with standard deviation ``sigma`` px (0 returns ``gray``); the
-    default is the detector's (``DetectorParams.blur_sigma``).
+def blur(gray: NDArray[np.uint8], *, sigma: float = 0.6) -> NDArray[np.uint8]:
+    """Stage 2: Gaussian blur, the image's edge pixels repeated beyond it.
 
     The kernel is ``2 * ceil(2.5 sigma) + 1`` wide, so ``sigma=0.6`` gives a 5x5 kernel.
+
+    Parameters
+    ----------
+    gray : ndarray (H, W) uint8
+        Grey image.
+    sigma : float
+        Standard deviation of the Gaussian, px, >= 0 (default: the detector's
+        ``DetectorParams.blur_sigma``); 0 returns ``gray`` itself.
+
+    Returns
+    -------
+    ndarray (H, W) uint8
+        The blurred image (``gray`` itself when ``sigma`` is 0).
+
+    Raises
+    ------
+    ValueError
+        If ``sigma`` is negative.
     """
     if sigma < 0:
         raise ValueError(f"sigma must be >= 0, got {sigma}")
@@ -36,7 +70,18 @@ def blur(gray: NDArray[np.uint8], sigma: float = 0.6) -> NDArray[np.uint8]:
 
 
 def default_window(shape: tuple[int, ...]) -> int:
-    """Adaptive-threshold window for an image of ``shape``: about 1/40 of the short side, odd, >= 7."""
+    """Adaptive-threshold window for an image of ``shape``.
+
+    Parameters
+    ----------
+    shape : tuple of int
+        The image's shape ``(H, W)`` or ``(H, W, C)``; only ``H`` and ``W`` are used.
+
+    Returns
+    -------
+    int
+        Window side, px: about 1/40 of the short side, odd, >= 7.
+    """
     w = max(7, round(min(shape[:2]) / 40.0))
     return w | 1
 
@@ -51,11 +96,23 @@ def threshold(gray: NDArray[np.uint8], *, window: int = 9, offset: float = 7.0) 
     Parameters
     ----------
     gray : ndarray (H, W) uint8
+        Grey image, usually blurred (:func:`blur`).
     window : int
         Odd neighbourhood size in pixels, >= 3 (default: the detector's first search pass).
+        The image's edge pixels are repeated beyond it.
     offset : float
         How much darker than the local mean a pixel must be, grey levels (default: the
         detector's ``DetectorParams.offset``).
+
+    Returns
+    -------
+    ndarray (H, W) uint8
+        Binary image: 255 on ink (dark) pixels, 0 elsewhere.
+
+    Raises
+    ------
+    ValueError
+        If ``window`` is not an odd integer >= 3.
     """
     if window < 3 or window % 2 == 0:
         raise ValueError(f"window must be an odd integer >= 3, got {window}")

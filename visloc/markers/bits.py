@@ -63,8 +63,21 @@ class CellSample:
 
 
 def square_to_quad(quads: NDArray) -> NDArray[np.float64]:
-    """Homographies (K, 3, 3) mapping the unit square (0,0), (1,0), (1,1), (0,1) onto each of
-    the quads (K, 4, 2), in closed form (Heckbert's projective mapping)."""
+    """Homographies mapping the unit square onto quads, in closed form (Heckbert's projective
+    mapping).
+
+    Parameters
+    ----------
+    quads : ndarray (K, 4, 2)
+        Corners ``(x, y)`` of each quad, px; corner ``i`` is the image of the unit square's
+        corner ``(0, 0), (1, 0), (1, 1), (0, 1)`` in turn.
+
+    Returns
+    -------
+    ndarray (K, 3, 3) float64
+        ``H`` per quad with ``[x w, y w, w] = H @ [u, v, 1]``, ``H[2, 2] = 1``: unit-square
+        point ``(u, v)`` lands on image point ``(x, y)``, in the pixel convention of ``quads``.
+    """
     q = np.asarray(quads, np.float64)
     x0, x1, x2, x3 = (q[:, i, 0] for i in range(4))
     y0, y1, y2, y3 = (q[:, i, 1] for i in range(4))
@@ -125,15 +138,27 @@ def sample_cells(gray: NDArray[np.uint8], quads: NDArray, n: int, *, per_side: i
     Parameters
     ----------
     gray : ndarray (H, W) uint8
+        Grey image.
     quads : ndarray (K, 4, 2) or (4, 2)
-        Corners clockwise in the image; corner 0 is the grid's top-left. The corners are the
-        outer corners of the cell area (pixel-centre convention: a pixel's area is
-        ``[x - 0.5, x + 0.5]``). They must be finite.
+        Corners ``(x, y)``, px, clockwise in the image; corner 0 is the grid's top-left. The
+        corners are the outer corners of the cell area (pixel centres at integer
+        coordinates: a pixel's area is ``[x - 0.5, x + 0.5]``). They must be finite.
     n : int
         Cells per side including the black border (bits per side + 2 x border cells).
     per_side : int
         Samples across each cell (``per_side ** 2`` per cell, 0.2 cell apart), read by one
         ``cv2.remap`` for all quads (bilinear, the image's edge pixels repeated beyond it).
+
+    Returns
+    -------
+    CellSample
+        ``cells`` (K, n, n) and ``ring`` (K, 4n + 4) mean grey levels, ``samples``
+        (K, n, n, per_side ** 2) uint8; row 0 of the cells runs from corner 0 to corner 1.
+
+    Raises
+    ------
+    ValueError
+        If a corner is not finite.
     """
     q = np.asarray(quads, np.float64).reshape(-1, 4, 2)
     m = per_side * per_side
@@ -158,12 +183,51 @@ def read_cells(gray: NDArray[np.uint8], quads: NDArray, n: int, *, per_side: int
     """:func:`sample_cells` then :func:`read_bits` (one threshold per marker): the detector's
     stage 9. The read is compiled (``visloc.markers._cells``: Otsu's threshold, the majority
     read and the border checks for each candidate in one pass, the numpy version's operations
-    in its order: the same bits); ``native`` picks it (``True``), numpy (``False``) or the
-    compiled one when it was built (``None``, :data:`NATIVE_CELLS`)."""
+    in its order: the same bits).
+
+    Parameters
+    ----------
+    gray : ndarray (H, W) uint8
+        Grey image.
+    quads : ndarray (K, 4, 2) or (4, 2)
+        Corners ``(x, y)``, px, pixel centres at integer coordinates, clockwise in the image,
+        corner 0 the grid's top-left: the outer corners of the cell area (as
+        :func:`sample_cells`). They must be finite.
+    n : int
+        Cells per side including the black border (bits per side + 2 ``border``).
+    per_side : int
+        Samples across each cell (:func:`sample_cells`).
+    border_error_rate : float
+        Tolerated white border cells as a fraction of the bit count (:func:`read_bits`).
+    min_contrast : float
+        Least difference between the white and black class means, grey levels.
+    border : int
+        Width of the black border in cells.
+    min_quiet_zone : float
+        Least fraction of the ring cells that must be white (:func:`read_bits`).
+    native : bool or None
+        Run the compiled read (``True``) or the numpy one (``False``); ``None``: the compiled
+        one when it was built (:data:`NATIVE_CELLS`).
+
+    Returns
+    -------
+    sample : CellSample
+        The sampled cells (:func:`sample_cells`).
+    read : BitRead
+        The bits and checks (:func:`read_bits`), bits (K, n - 2 border, n - 2 border).
+
+    Raises
+    ------
+    ValueError
+        If a corner is not finite.
+    RuntimeError
+        If ``native=True`` and the compiled module was not built.
+    """
     sample = sample_cells(gray, quads, n, per_side=per_side)
     k = len(sample.cells)
     if k == 0 or not use_compiled(native, _cells, "visloc.markers._cells"):
-        return sample, read_bits(sample, border_error_rate, min_contrast, border=border, min_quiet_zone=min_quiet_zone)
+        return sample, read_bits(sample, border_error_rate=border_error_rate, min_contrast=min_contrast,
+                                 border=border, min_quiet_zone=min_quiet_zone)
     s = n - 2 * border
     valid, bits, scal = _cells.read_samples(np.ascontiguousarray(sample.samples), np.ascontiguousarray(sample.ring),
                                             k, n, per_side * per_side, border, float(border_error_rate),
@@ -194,8 +258,10 @@ def cell_white_fractions(gray: NDArray[np.uint8], quads: NDArray, n: int, thresh
     Parameters
     ----------
     gray : ndarray (H, W) uint8
-    quads : ndarray (K, 4, 2)
-        Corners clockwise in the image, corner 0 the grid's top-left (as :func:`sample_cells`).
+        Grey image.
+    quads : ndarray (K, 4, 2) or (4, 2)
+        Corners ``(x, y)``, px, pixel centres at integer coordinates, clockwise in the image,
+        corner 0 the grid's top-left (as :func:`sample_cells`).
     n : int
         Cells per side including the border.
     threshold : ndarray (K,)
@@ -208,7 +274,9 @@ def cell_white_fractions(gray: NDArray[np.uint8], quads: NDArray, n: int, thresh
 
     Returns
     -------
-    ndarray (K, n, n)
+    ndarray (K, n, n) float64
+        Fraction in [0, 1] of each cell's samples brighter than its marker's threshold; row
+        0 runs from corner 0 to corner 1, column 0 from corner 0 to corner 3.
     """
     q = np.asarray(quads, np.float64).reshape(-1, 4, 2)
     if len(q) == 0:
@@ -225,9 +293,18 @@ def cell_white_fractions(gray: NDArray[np.uint8], quads: NDArray, n: int, thresh
 
 
 def otsu_threshold(values: NDArray) -> tuple[NDArray, NDArray, NDArray]:
-    """Otsu's two-class split of each row of ``values`` (K, m).
+    """Otsu's two-class split of each row of ``values``.
 
-    Returns ``(threshold, dark_mean, bright_mean)``, each (K,).
+    Parameters
+    ----------
+    values : ndarray (K, m) or (m,)
+        Grey levels, one set of m >= 2 values per row.
+
+    Returns
+    -------
+    threshold, dark_mean, bright_mean : ndarray (K,) float64
+        The two classes' mean grey levels at the split that maximises the between-class
+        variance, and the threshold midway between them.
     """
     v = np.sort(np.atleast_2d(np.asarray(values, np.float64)), axis=1)
     m = v.shape[1]
@@ -269,7 +346,7 @@ class BitRead(NamedTuple):
 
 
 def read_bits(
-    sample: CellSample, border_error_rate: float = 0.35, min_contrast: float = 10.0, *, border: int = 1,
+    sample: CellSample, *, border_error_rate: float = 0.35, min_contrast: float = 10.0, border: int = 1,
     min_quiet_zone: float = 0.0, shading: bool = False,
 ) -> BitRead:
     """Threshold the cells into bits and check the black border.
@@ -280,6 +357,8 @@ def read_bits(
     Parameters
     ----------
     sample : CellSample
+        Cells (K, n, n), ring (K, 4n + 4) and, optionally, samples (K, n, n, S) of K
+        candidates (:func:`sample_cells`).
     border_error_rate : float
         Tolerated white border cells as a fraction of the bit count.
     min_contrast : float
@@ -295,6 +374,12 @@ def read_bits(
         (the marker's local mean level) instead of at one level: for light that changes across
         the marker (glare, a shadow's edge, vignetting), where one threshold reads the cells
         of the dim side as black.
+
+    Returns
+    -------
+    BitRead
+        ``valid`` (K,) bool, ``bits`` (K, n - 2 border, n - 2 border) uint8 (1 = white),
+        ``margin`` (K,) in [0, 1], ``contrast`` (K,) and ``threshold`` (K,) in grey levels.
     """
     cells = sample.cells
     k, n, _ = cells.shape
@@ -340,18 +425,32 @@ def _cell_centres(n: int) -> NDArray[np.float64]:
 
 
 def decode(
-    bits: NDArray[np.uint8], dictionary: Dictionary, error_correction_rate: float = 0.6
+    bits: NDArray[np.uint8], dictionary: Dictionary, *, error_correction_rate: float = 0.6
 ) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp], NDArray[np.bool_]]:
-    """Stage 10: match bit grids (K, s, s) against ``dictionary`` in four orientations.
+    """Stage 10: match bit grids against ``dictionary`` in four orientations.
 
-    At most ``int(dictionary.max_correction * error_correction_rate)`` bits are corrected
-    (OpenCV's rule).
+    Parameters
+    ----------
+    bits : ndarray (K, s, s) uint8
+        Inner cells read from K candidates, 1 = white, row 0 running from candidate corner
+        0 to corner 1 (:func:`read_bits`); ``s`` is ``dictionary.marker_size``.
+    dictionary : Dictionary
+        The markers to match.
+    error_correction_rate : float
+        At most ``int(dictionary.max_correction * error_correction_rate)`` bits are corrected
+        (OpenCV's rule).
 
     Returns
     -------
     ids, corner_shift, hamming, ok : ndarray (K,)
-        ``corner_shift`` is the index of the candidate corner that is the marker's own
-        top-left; ``ok`` is False where no marker is close enough.
+        intp, intp, intp and bool: the closest marker's id, the index (0-3) of the candidate
+        corner that is the marker's own top-left, the number of differing bits, and
+        whether the marker is close enough (False: no marker matched).
+
+    Raises
+    ------
+    ValueError
+        If ``bits`` does not hold ``s * s`` cells per candidate.
     """
     b = np.asarray(bits).reshape(len(bits), -1).astype(np.uint64)
     if b.shape[1] != dictionary.marker_size**2:

@@ -51,9 +51,25 @@ def outer_borders(binary: NDArray[np.uint8]) -> tuple[list[NDArray[np.int32]], N
     """Stage 4: outer borders of the ink (255) regions of a binary image, and which of them
     enclose at least one hole.
 
-    Returns a list of ``(N, 1, 2)`` int32 arrays (OpenCV's layout) of ``(x, y)`` pixel
-    centres, each a closed 8-connected border traced in order, and a bool array with one
-    flag per border. Holes (inner borders) are left out of the list.
+    Parameters
+    ----------
+    binary : ndarray (H, W) uint8
+        Binary image, ink 255 (any non-zero value), background 0
+        (:func:`~visloc.markers.binarize.threshold`).
+
+    Returns
+    -------
+    contours : list of ndarray (N, 1, 2) int32
+        One per outer border, in OpenCV's layout: the ``(x, y)`` pixel centres (integer
+        coordinates) of a closed 8-connected border, traced in order. Holes (inner borders)
+        are left out.
+    encloses : ndarray (len(contours),) bool
+        Whether each border's region encloses at least one hole.
+
+    Raises
+    ------
+    ValueError
+        If ``binary`` is not a (H, W) uint8 image.
     """
     _check_binary(binary)
     contours, hierarchy = cv2.findContours(binary, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
@@ -64,15 +80,38 @@ def outer_borders(binary: NDArray[np.uint8]) -> tuple[list[NDArray[np.int32]], N
     return [contours[i] for i in outer], h[outer, 2] >= 0  # a child: it encloses a hole
 
 
-def enclosing_borders(binary: NDArray[np.uint8], min_len: int = 1, max_len: int | None = None, *,
+def enclosing_borders(binary: NDArray[np.uint8], *, min_len: int = 1, max_len: int | None = None,
                       native: bool | None = None) -> list[NDArray[np.int32]]:
     """Stage 4 as the detector runs it: the outer borders of the ink regions that enclose at
     least one hole, with ``min_len <= points <= max_len``.
 
-    The same borders, in the same order and point for point, as
-    ``outer_borders(binary)`` filtered by its hole flags, as ``(N, 2)`` int32 arrays.
-    ``native`` picks the compiled follower (``True``) or ``cv2.findContours`` (``False``);
-    ``None`` uses the compiled one when it was built (:data:`NATIVE_BORDERS`).
+    The same borders, in the same order and point for point, as ``outer_borders(binary)``
+    filtered by its hole flags.
+
+    Parameters
+    ----------
+    binary : ndarray (H, W) uint8
+        Binary image, ink 255 (any non-zero value), background 0
+        (:func:`~visloc.markers.binarize.threshold`).
+    min_len : int
+        Fewest points a kept border may have (e.g. from :func:`perimeter_bounds`).
+    max_len : int or None
+        Most points a kept border may have; ``None``: no upper bound.
+    native : bool or None
+        The compiled follower (``True``) or ``cv2.findContours`` (``False``); ``None`` uses
+        the compiled one when it was built (:data:`NATIVE_BORDERS`).
+
+    Returns
+    -------
+    list of ndarray (N, 2) int32
+        Each kept border's ``(x, y)`` pixel centres (integer coordinates), traced in order.
+
+    Raises
+    ------
+    ValueError
+        If ``binary`` is not a (H, W) uint8 image.
+    RuntimeError
+        If ``native=True`` and the compiled module was not built.
     """
     _check_binary(binary)
     hi = np.iinfo(np.int64).max if max_len is None else int(max_len)
@@ -88,7 +127,8 @@ def _check_binary(binary: NDArray) -> None:
         raise ValueError(f"binary must be a (H, W) uint8 image, got {binary.shape} {binary.dtype}")
 
 
-def _packed_borders(binary: NDArray[np.uint8], min_len: int, max_len: int) -> tuple[NDArray[np.int32], NDArray[np.int64]]:
+def _packed_borders(binary: NDArray[np.uint8], min_len: int,
+                    max_len: int) -> tuple[NDArray[np.int32], NDArray[np.int64]]:
     """The compiled stage 4: every kept border's points (P, 2) packed, and the offsets (K + 1)."""
     b = np.ascontiguousarray(binary)
     raw, raw_offsets = _borders.enclosing_borders(b, b.shape[0], b.shape[1], min_len, max_len)
@@ -108,9 +148,26 @@ def _packed_filter(pts: NDArray, offsets: NDArray, shape: tuple[int, ...], lo: i
 def find_contours(binary: NDArray[np.uint8], *, enclosing: bool = False) -> list[NDArray[np.int32]]:
     """Stage 4: the outer borders of :func:`outer_borders`.
 
-    With ``enclosing=True`` only the borders of ink regions that enclose at least one hole
-    are returned: a marker's black frame always encloses its white cells, while most texture
-    blobs enclose nothing (on textured 640 x 480 frames, 41 of 1,800 outer borders).
+    Parameters
+    ----------
+    binary : ndarray (H, W) uint8
+        Binary image, ink 255 (any non-zero value), background 0
+        (:func:`~visloc.markers.binarize.threshold`).
+    enclosing : bool
+        Return only the borders of ink regions that enclose at least one hole: a marker's
+        black frame always encloses its white cells, while most texture blobs enclose
+        nothing (on textured 640 x 480 frames, 41 of 1,800 outer borders).
+
+    Returns
+    -------
+    list of ndarray (N, 1, 2) int32
+        Each border's ``(x, y)`` pixel centres (integer coordinates), traced in order
+        (OpenCV's layout).
+
+    Raises
+    ------
+    ValueError
+        If ``binary`` is not a (H, W) uint8 image.
     """
     contours, holes = outer_borders(binary)
     if not enclosing:
@@ -168,9 +225,23 @@ def _on_sides(contour: NDArray, quad: NDArray, tol: float) -> float:
     return float(((d * d).sum(axis=2).min(axis=1) <= tol * tol).mean())
 
 
-def perimeter_bounds(image_shape: tuple[int, ...], params: CandidateFilter = CandidateFilter()) -> tuple[int, int]:
-    """Stage 5's first test: the fewest and most contour points a candidate may have in an
-    image of ``image_shape`` (``min_len``, ``max_len`` of :func:`enclosing_borders`)."""
+def perimeter_bounds(image_shape: tuple[int, ...], *,
+                     params: CandidateFilter = CandidateFilter()) -> tuple[int, int]:
+    """Stage 5's first test: the fewest and most contour points a candidate may have.
+
+    Parameters
+    ----------
+    image_shape : tuple of int
+        Shape ``(H, W)`` or ``(H, W, C)`` of the searched image, px.
+    params : CandidateFilter
+        The bounds: ``min_perimeter_rate``, ``max_perimeter_rate`` (fractions of the larger
+        side) and ``min_side`` (px; a candidate has at least about ``2.8 min_side`` points).
+
+    Returns
+    -------
+    min_len, max_len : int
+        Contour points, as ``min_len`` and ``max_len`` of :func:`enclosing_borders`.
+    """
     size = max(image_shape[:2])
     lo = max(params.min_perimeter_rate * size, 2.8 * params.min_side)  # 8-connected: >= 2 sqrt(2) side
     return int(np.ceil(lo)), int(np.floor(params.max_perimeter_rate * size))
@@ -179,8 +250,8 @@ def perimeter_bounds(image_shape: tuple[int, ...], params: CandidateFilter = Can
 def filter_candidates(
     contours: list[NDArray[np.int32]],
     image_shape: tuple[int, ...],
-    params: CandidateFilter = CandidateFilter(),
     *,
+    params: CandidateFilter = CandidateFilter(),
     native: bool | None = None,
 ) -> list[tuple[NDArray[np.int32], NDArray[np.int32]]]:
     """Stage 5: keep contours that may be the outer border of a square marker.
@@ -189,18 +260,33 @@ def filter_candidates(
     size; area and compactness; a four-vertex convex polygon approximation (convexity);
     every side at least ``min_side``; no vertex near the image border; solidity.
 
-    ``native`` picks the compiled filter (``True``) or the OpenCV calls (``False``); ``None``
-    uses the compiled one when it was built (:data:`NATIVE_BORDERS`). Both keep the same
-    contours with the same quads.
+    Parameters
+    ----------
+    contours : list of ndarray (N, 2) or (N, 1, 2) int32
+        Closed borders, ``(x, y)`` pixel centres (integer coordinates) in order
+        (:func:`enclosing_borders`, :func:`find_contours`).
+    image_shape : tuple of int
+        Shape ``(H, W)`` or ``(H, W, C)`` of the image they were traced in, px.
+    params : CandidateFilter
+        The bounds of the tests.
+    native : bool or None
+        The compiled filter (``True``) or the OpenCV calls (``False``); ``None`` uses the
+        compiled one when it was built (:data:`NATIVE_BORDERS`). Both keep the same contours
+        with the same quads.
 
     Returns
     -------
     list of (contour, quad)
-        The surviving contours as (N, 2) arrays with the vertices (4, 2) of their
-        approximating polygon.
+        The surviving contours as (N, 2) int32 arrays with the vertices (4, 2) int32 of their
+        approximating polygon, ``(x, y)`` pixel centres, in the contour's order.
+
+    Raises
+    ------
+    RuntimeError
+        If ``native=True`` and the compiled module was not built.
     """
     h, w = image_shape[:2]
-    lo, hi = perimeter_bounds(image_shape, params)
+    lo, hi = perimeter_bounds(image_shape, params=params)
     if use_compiled(native, _filter, "visloc.markers._filter") and contours:
         flat = [np.asarray(c).reshape(-1, 2) for c in contours]
         pts = np.ascontiguousarray(np.concatenate(flat), np.int32)
@@ -254,7 +340,7 @@ def filter_candidates(
     return out
 
 
-def find_candidates(binary: NDArray[np.uint8], params: CandidateFilter = CandidateFilter(), *,
+def find_candidates(binary: NDArray[np.uint8], *, params: CandidateFilter = CandidateFilter(),
                     native: bool | None = None) -> list[tuple[NDArray[np.int32], NDArray[np.int32]]]:
     """Stages 4 and 5 as the detector runs them: :func:`filter_candidates` on the
     :func:`enclosing_borders` of ``binary`` within :func:`perimeter_bounds`.
@@ -262,11 +348,36 @@ def find_candidates(binary: NDArray[np.uint8], params: CandidateFilter = Candida
     The compiled route hands the packed borders of stage 4 straight to the compiled filter,
     so only the surviving borders become arrays of their own; the same (contour, quad) pairs,
     in the same order, as the two functions called one after the other.
+
+    Parameters
+    ----------
+    binary : ndarray (H, W) uint8
+        Binary image, ink 255 (any non-zero value), background 0
+        (:func:`~visloc.markers.binarize.threshold`).
+    params : CandidateFilter
+        The bounds of stage 5.
+    native : bool or None
+        The compiled follower and filter (``True``) or the OpenCV calls (``False``);
+        ``None`` uses the compiled ones when they were built (:data:`NATIVE_BORDERS`).
+
+    Returns
+    -------
+    list of (contour, quad)
+        As :func:`filter_candidates`: (N, 2) int32 ``(x, y)`` pixel centres of each kept
+        border and the (4, 2) int32 vertices of its approximating polygon.
+
+    Raises
+    ------
+    ValueError
+        If ``binary`` is not a (H, W) uint8 image.
+    RuntimeError
+        If ``native=True`` and a compiled module was not built.
     """
-    lo, hi = perimeter_bounds(binary.shape, params)
+    lo, hi = perimeter_bounds(binary.shape, params=params)
     if not (use_compiled(native, _borders, "visloc.markers._borders")
             and use_compiled(native, _filter, "visloc.markers._filter")):
-        return filter_candidates(enclosing_borders(binary, lo, hi, native=native), binary.shape, params, native=native)
+        return filter_candidates(enclosing_borders(binary, min_len=lo, max_len=hi, native=native), binary.shape,
+                                 params=params, native=native)
     _check_binary(binary)
     pts, offsets = _packed_borders(binary, lo, hi)
     if len(offsets) < 2:

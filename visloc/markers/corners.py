@@ -60,15 +60,26 @@ class RadialSplit:
     groups: list[NDArray[np.intp]]
 
 
-def radial_profile(contour: NDArray, sigma: float | None = None) -> tuple[NDArray, NDArray, NDArray]:
+def radial_profile(contour: NDArray, *, sigma: float | None = None) -> tuple[NDArray, NDArray, NDArray]:
     """Centre, point-to-centre distance and its circular Gaussian smoothing.
 
     Parameters
     ----------
     contour : ndarray (N, 2)
-        Closed contour, points in order.
+        Closed contour, ``(x, y)`` points in order, px.
     sigma : float, optional
-        Smoothing in contour points; defaults to ``max(1, N / 100)``.
+        Smoothing in contour points; defaults to ``max(1, N / 100)``. The kernel reaches
+        ``min(ceil(3 sigma), (N - 1) // 2)`` points to either side.
+
+    Returns
+    -------
+    center : ndarray (2,) float64
+        Mean of the contour points ``(x, y)``, px (report App. G).
+    distance : ndarray (N,) float64
+        Distance of every point to ``center``, px.
+    smoothed : ndarray (N,) float64
+        ``distance`` smoothed along the closed contour (a copy of it when the kernel would
+        reach less than one point to either side).
     """
     pts = np.asarray(contour, np.float64)
     center = pts.mean(axis=0)  # report App. G: centre = mean of the contour pixels
@@ -85,13 +96,29 @@ def radial_profile(contour: NDArray, sigma: float | None = None) -> tuple[NDArra
     return center, dist, np.convolve(padded, k, mode="valid")
 
 
-def radial_peaks(smoothed: NDArray, count: int = 4, min_prominence: float | None = None) -> NDArray[np.intp] | None:
+def radial_peaks(smoothed: NDArray, *, count: int = 4,
+                 min_prominence: float | None = None) -> NDArray[np.intp] | None:
     """Indices of the ``count`` most significant maxima of a circular profile, in order.
 
     Maxima closer than ``N / 16`` points to a higher one are merged; of the rest, the
     ``count`` with the largest prominence (height above the higher of the two valleys that
-    separate the peak from its neighbouring peaks) are kept. Returns ``None`` when fewer than
-    ``count`` maxima rise at least ``min_prominence`` (default: 1 % of the mean + 0.1).
+    separate the peak from its neighbouring peaks) are kept.
+
+    Parameters
+    ----------
+    smoothed : ndarray (N,)
+        A circular profile, e.g. the smoothed distance of :func:`radial_profile` (px).
+    count : int
+        Number of maxima wanted (4: a quadrilateral's corners).
+    min_prominence : float, optional
+        Least prominence of a kept maximum, in the units of ``smoothed``; default 1 % of the
+        profile's mean + 0.1.
+
+    Returns
+    -------
+    ndarray (count,) intp or None
+        Indices into ``smoothed``, ascending; ``None`` when fewer than ``count`` maxima rise
+        at least ``min_prominence``.
     """
     d = np.round(np.asarray(smoothed, np.float64), 9)  # no peak decided by rounding noise
     n = len(d)
@@ -123,11 +150,24 @@ def radial_peaks(smoothed: NDArray, count: int = 4, min_prominence: float | None
     return ch.astype(np.intp)
 
 
-def split_sides(n: int, peaks: NDArray[np.intp], padding: float = 0.1) -> list[NDArray[np.intp]]:
+def split_sides(n: int, peaks: NDArray[np.intp], *, padding: float = 0.1) -> list[NDArray[np.intp]]:
     """Contour indices of the four sides between consecutive ``peaks`` (circular).
 
-    ``padding`` is the fraction of each side's length dropped at both ends, plus one point,
-    so the rounded corners do not bend the fitted lines (report App. G, Figure G.1.E).
+    Parameters
+    ----------
+    n : int
+        Number of points of the closed contour.
+    peaks : ndarray (k,) int
+        Contour indices of the corners in ascending order (:func:`radial_peaks`; k = 4).
+    padding : float
+        Fraction of each side's length dropped at both ends, plus one point, so the rounded
+        corners do not bend the fitted lines (report App. G, Figure G.1.E).
+
+    Returns
+    -------
+    list of k ndarray (M_i,) intp
+        Side ``i``: the indices from ``peaks[i]`` to ``peaks[i + 1]`` (circular, mod ``n``)
+        without the padding; empty when the side is too short.
     """
     groups = []
     for k in range(len(peaks)):
@@ -140,10 +180,28 @@ def split_sides(n: int, peaks: NDArray[np.intp], padding: float = 0.1) -> list[N
 
 
 def fit_line(points: NDArray, weights: NDArray | None = None) -> NDArray[np.float64]:
-    """Total-least-squares line through ``points`` (M, 2).
+    """Total-least-squares line through ``points``.
 
-    Returns ``(a, b, c)`` with ``a x + b y = c`` and ``a^2 + b^2 = 1``: the normal is the
-    minor eigenvector of the (weighted) scatter matrix, so vertical lines need no special case.
+    The normal is the minor eigenvector of the (weighted) scatter matrix, so vertical lines
+    need no special case.
+
+    Parameters
+    ----------
+    points : ndarray (M, 2)
+        ``(x, y)`` points, M >= 2.
+    weights : ndarray (M,), optional
+        Non-negative weights; 0 leaves a point out.
+
+    Returns
+    -------
+    ndarray (3,) float64
+        ``(a, b, c)`` with ``a x + b y = c`` and ``a^2 + b^2 = 1`` (the normal's sign is
+        arbitrary), in the units of ``points``.
+
+    Raises
+    ------
+    ValueError
+        If ``points`` is not a 2-D array of at least 2 points.
     """
     p = np.asarray(points, np.float64)
     if p.ndim != 2 or len(p) < 2:
@@ -157,13 +215,15 @@ def fit_lines(points: NDArray, weights: NDArray | None = None) -> NDArray[np.flo
     Parameters
     ----------
     points : ndarray (K, M, 2)
+        K sets of M ``(x, y)`` points.
     weights : ndarray (K, M), optional
         Non-negative weights; 0 leaves a point out (for sets of different sizes).
 
     Returns
     -------
-    ndarray (K, 3)
-        ``(a, b, c)`` per line, ``a x + b y = c``, unit normal.
+    ndarray (K, 3) float64
+        ``(a, b, c)`` per line, ``a x + b y = c``, unit normal ``(a, b)`` (its sign is
+        arbitrary), in the units of ``points``.
     """
     p = np.asarray(points, np.float64)
     w = np.ones(p.shape[:2]) if weights is None else np.asarray(weights, np.float64)
@@ -186,7 +246,18 @@ def fit_lines(points: NDArray, weights: NDArray | None = None) -> NDArray[np.flo
 
 
 def intersect_lines(l1: NDArray, l2: NDArray) -> NDArray[np.float64]:
-    """Intersection point (2,) of two lines ``a x + b y = c``; NaN when parallel."""
+    """Intersection point of two lines.
+
+    Parameters
+    ----------
+    l1, l2 : ndarray (3,)
+        Lines ``(a, b, c)`` with ``a x + b y = c`` (:func:`fit_line`).
+
+    Returns
+    -------
+    ndarray (2,) float64
+        The point ``(x, y)``; NaN when the lines are parallel.
+    """
     det = l1[0] * l2[1] - l1[1] * l2[0]
     if abs(det) < 1e-12:
         return np.array([np.nan, np.nan])
@@ -196,8 +267,19 @@ def intersect_lines(l1: NDArray, l2: NDArray) -> NDArray[np.float64]:
 
 
 def quad_from_lines(lines: NDArray) -> NDArray[np.float64]:
-    """Corners (..., 4, 2) of the quadrilaterals bounded by four lines (..., 4, 3) in order:
-    corner k is the intersection of side k-1 and side k (NaN where two sides are parallel)."""
+    """Corners of the quadrilaterals bounded by four lines in order.
+
+    Parameters
+    ----------
+    lines : ndarray (..., 4, 3)
+        Each quadrilateral's sides ``(a, b, c)``, ``a x + b y = c``, in order around it.
+
+    Returns
+    -------
+    ndarray (..., 4, 2) float64
+        Corner ``k`` is the intersection ``(x, y)`` of side k-1 and side k (NaN where two
+        sides are parallel).
+    """
     l1 = lines[..., _PREV, :]
     l2 = lines
     det = l1[..., 0] * l2[..., 1] - l1[..., 1] * l2[..., 0]
@@ -208,7 +290,18 @@ def quad_from_lines(lines: NDArray) -> NDArray[np.float64]:
 
 
 def orient_clockwise(quad: NDArray) -> NDArray:
-    """Return ``quad`` (4, 2) ordered clockwise in the image (y down), starting at its first corner."""
+    """Return ``quad`` ordered clockwise in the image (y down), starting at its first corner.
+
+    Parameters
+    ----------
+    quad : ndarray (4, 2)
+        Corners ``(x, y)`` in image coordinates, in either direction around the quad.
+
+    Returns
+    -------
+    ndarray (4, 2)
+        ``quad`` itself when it is already clockwise, else its corners in the order 0, 3, 2, 1.
+    """
     x, y = quad[:, 0], quad[:, 1]
     area2 = np.dot(x, y[_NEXT]) - np.dot(x[_NEXT], y)
     return quad if area2 > 0 else quad[[0, 3, 2, 1]]
@@ -237,10 +330,15 @@ def fit_quad(
     Parameters
     ----------
     contour : ndarray (N, 2)
-    sigma, padding
-        See :func:`radial_profile` and :func:`split_sides`.
+        Closed border, ``(x, y)`` pixel centres (integer coordinates) in order
+        (:func:`~visloc.markers.contours.enclosing_borders`).
+    sigma : float, optional
+        Smoothing of the radial profile in contour points; default ``max(1, N / 100)``
+        (:func:`radial_profile`).
+    padding : float
+        Fraction of each side dropped at both ends (:func:`split_sides`).
     hint : ndarray (4, 2), optional
-        Approximate corners (e.g. a polygon approximation) used when the radial profile
+        Approximate corners ``(x, y)``, px (e.g. a polygon approximation) used when the radial profile
         has fewer than four significant peaks: an obtuse corner seen obliquely shows as a
         shoulder, not a peak, and on short contours pixel steps rival the corners'
         prominence.
@@ -248,13 +346,15 @@ def fit_quad(
     Returns
     -------
     (corners, split) or None
-        Corners (4, 2) clockwise in the image, and the split for inspection; ``None`` when no
-        four corners could be found.
+        Corners (4, 2) float64, ``(x, y)`` px (pixel centres at integer coordinates) on the
+        ink's outer edge, clockwise in the image from the corner at the first peak (not yet
+        the marker's own top-left: stage 10 finds that), and the split for inspection;
+        ``None`` when no four corners could be found.
     """
     pts = np.asarray(contour, np.float64)
     n = len(pts)
     f = profile_stride(n)  # the profile at every f-th point (sigma in contour points)
-    center, _, smooth_f = radial_profile(pts[::f], None if sigma is None else sigma / f)
+    center, _, smooth_f = radial_profile(pts[::f], sigma=None if sigma is None else sigma / f)
     peaks = radial_peaks(smooth_f)
     if peaks is not None:
         peaks = peaks * f
@@ -265,7 +365,7 @@ def fit_quad(
         peaks = np.sort(np.argmin(((pts[None, :, :] - h[:, None, :]) ** 2).sum(-1), axis=1))
         if len(np.unique(peaks)) < 4:
             return None
-    groups = split_sides(len(pts), peaks, padding)
+    groups = split_sides(len(pts), peaks, padding=padding)
     sizes = [len(g) for g in groups]
     if min(sizes) < 2:
         return None

@@ -141,13 +141,18 @@ def fit_quads(
 
     Parameters
     ----------
-    contours : list of ndarray (N_k, 2)
-        Closed contours, points in order (at least 4 points each).
+    contours : list of ndarray (N_k, 2) int
+        Closed contours, ``(x, y)`` pixel centres (integer coordinates) in order, at least 4
+        points each (:func:`~visloc.markers.contours.find_candidates`).
     hints : ndarray (K, 4, 2), optional
-        Approximate corners per contour, used where the radial profile has fewer than four
-        significant peaks (see :func:`fit_quad`).
-    sigma, padding
-        As for :func:`fit_quad`.
+        Approximate corners ``(x, y)`` per contour, px, used where the radial profile has
+        fewer than four significant peaks (see :func:`~visloc.markers.corners.fit_quad`).
+    sigma : float or None
+        Smoothing of the radial profiles in contour points (> 0); ``None``:
+        ``max(1, N_k / 100)`` per contour, as for :func:`~visloc.markers.corners.fit_quad`.
+    padding : float
+        Fraction of each side dropped at both ends, as for
+        :func:`~visloc.markers.corners.fit_quad`.
     splits : bool
         Also return the :class:`RadialSplit` of each contour (for traces; computed by the numpy
         version).
@@ -157,12 +162,20 @@ def fit_quads(
 
     Returns
     -------
-    corners : ndarray (K, 4, 2)
-        Clockwise corners (NaN where ``ok`` is False).
+    corners : ndarray (K, 4, 2) float64
+        Corners ``(x, y)``, px (pixel centres at integer coordinates), clockwise in the image
+        as :func:`~visloc.markers.corners.fit_quad` gives them (NaN where ``ok`` is False).
     ok : ndarray (K,) bool
         Whether four corners were found.
     splits : list of RadialSplit or None, or None
         Per contour when ``splits`` is True.
+
+    Raises
+    ------
+    ValueError
+        If ``sigma`` is not > 0, or (compiled version) a contour has fewer than 4 points.
+    RuntimeError
+        If ``native=True`` and the compiled module was not built.
     """
     k = len(contours)
     if k == 0:

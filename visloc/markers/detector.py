@@ -415,12 +415,12 @@ class MarkerDetector:
         # the image-border margin is in full-resolution pixels whatever the pass's scale
         candidates = replace(p.candidates, min_side=min_side,
                              border_distance=p.candidates.border_distance / scale.max())
-        blurred = blur(work, p.blur_sigma)  # stage 2
+        blurred = blur(work, sigma=p.blur_sigma)  # stage 2
         binary = threshold(blurred, window=window, offset=p.offset if sp.offset is None else sp.offset)  # stage 3
         # stage 4: a marker's frame encloses its white cells, so ink without a hole is no marker;
         # stage 5 on those borders
         return self._polygons(_PassImage(work.shape, scale, window, candidates, blurred, binary,
-                                         find_candidates(binary, candidates, native=p.native)))
+                                         find_candidates(binary, params=candidates, native=p.native)))
 
     @staticmethod
     def _polygons(search: _PassImage) -> _PassImage:
@@ -476,7 +476,8 @@ class MarkerDetector:
         square ``width`` px wide."""
         binary = cv2.erode(found.binary, np.ones((width, width), np.uint8))
         return self._polygons(replace(found, binary=binary,
-                                      found=find_candidates(binary, found.candidates, native=self.params.native)))
+                                      found=find_candidates(binary, params=found.candidates,
+                                                            native=self.params.native)))
 
     def _passes(self, gray: NDArray[np.uint8], passes: list[SearchPass], base: float,
                 keep: list[_PassImage]) -> Iterator[_PassImage]:
@@ -633,7 +634,8 @@ class MarkerDetector:
             gray, corners, n_cells, per_side=4, border_error_rate=p.border_error_rate, border=bb,
             min_quiet_zone=p.min_quiet_zone, native=p.native)
         valid, bits, margin, contrast, thr = (np.array(a) for a in (valid, bits, margin, contrast, thr))
-        reads = [valid, bits, margin, contrast, thr, *decode(bits, self.dictionary, p.error_correction_rate)]  # 10
+        reads = [valid, bits, margin, contrast, thr,
+                 *decode(bits, self.dictionary, error_correction_rate=p.error_correction_rate)]  # 10
         cells = self._second_reads(gray, quads, corners, refined, cells, reads)
         valid, bits, margin, contrast, thr, ids, shift, hamming, matched = reads
         accept = valid & matched
@@ -687,9 +689,9 @@ class MarkerDetector:
             if not len(retry):
                 continue
             again = sample_cells(gray, quads[retry], n_cells, per_side=4) if use_fit else _take(cells, retry)
-            read = read_bits(again, p.border_error_rate, border=bb, min_quiet_zone=p.min_quiet_zone,
+            read = read_bits(again, border_error_rate=p.border_error_rate, border=bb, min_quiet_zone=p.min_quiet_zone,
                              shading=shading)
-            dec = decode(read.bits, self.dictionary, p.error_correction_rate)
+            dec = decode(read.bits, self.dictionary, error_correction_rate=p.error_correction_rate)
             pick = read.valid & dec[3]
             won = retry[pick]
             if not len(won):

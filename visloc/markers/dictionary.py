@@ -91,7 +91,19 @@ class Dictionary:
 
 
 def pack_bits(bits: NDArray) -> np.uint64:
-    """Pack a grid of 0/1 values (row-major, at most 64 cells) into one uint64."""
+    """Pack a grid of 0/1 values into one uint64.
+
+    Parameters
+    ----------
+    bits : ndarray (s, s) or any shape
+        0/1 values, at most 64 of them, read row-major.
+
+    Returns
+    -------
+    numpy.uint64
+        Value ``i`` (row-major) in bit ``i``, least significant first (as :class:`Dictionary`
+        packs its ``codes``).
+    """
     flat = np.asarray(bits, np.uint64).ravel()
     weights = np.left_shift(np.uint64(1), np.arange(flat.size, dtype=np.uint64))
     return np.uint64(np.sum(flat * weights, dtype=np.uint64))
@@ -169,11 +181,23 @@ def _from_yaml(path: str) -> Dictionary:
 
 
 def load_dictionary(spec: str | Dictionary) -> Dictionary:
-    """Load a dictionary by OpenCV predefined name (``"DICT_4X4_50"``, ``"DICT_APRILTAG_36h11"``,
-    ``"DICT_ARUCO_ORIGINAL"``, ...) or from the path of an OpenCV dictionary YAML file.
+    """Load a dictionary by OpenCV predefined name or from an OpenCV dictionary YAML file.
+
+    Parameters
+    ----------
+    spec : str or Dictionary
+        The path of an existing OpenCV dictionary YAML file, or an OpenCV predefined name
+        (``"DICT_4X4_50"``, ``"DICT_APRILTAG_36h11"``, ``"DICT_ARUCO_ORIGINAL"``, ...; case and
+        the ``DICT_`` prefix optional). A :class:`Dictionary` is returned as it is.
+
+    Returns
+    -------
+    Dictionary
 
     Raises
     ------
+    TypeError
+        If ``spec`` is neither a str nor a Dictionary.
     ValueError
         Unknown name, missing file, or a malformed file.
     """

@@ -95,8 +95,24 @@ def _tiles(tiles: list[NDArray[np.uint8]], per_row: int) -> NDArray[np.uint8]:
     return out
 
 
-def explain_panels(trace: DetectionTrace, max_candidates: int = 48) -> dict[str, NDArray[np.uint8]]:
-    """Panels B-I of report Figure G.1 as BGR images, keyed by file suffix."""
+def explain_panels(trace: DetectionTrace, *, max_candidates: int = 48) -> dict[str, NDArray[np.uint8]]:
+    """Panels B-I of report Figure G.1 as BGR images.
+
+    Parameters
+    ----------
+    trace : DetectionTrace
+        One image's stages (:meth:`visloc.markers.MarkerDetector.trace`).
+    max_candidates : int
+        How many of the candidates (the first ones) the candidate panels show.
+
+    Returns
+    -------
+    dict of str to ndarray (h, w, 3) uint8
+        BGR panels keyed by file suffix: ``B_binary_pass<k>`` (each search pass's binary
+        image, at the pass's scale), ``C_contours``, ``E_groups``, ``F_corners`` and
+        ``I_detections`` (the size of ``trace.gray``), and the tile sheets ``D_radial``
+        (radial profiles) and ``G_bits`` (sampled cells).
+    """
     cands = trace.candidates[:max_candidates]
     panels: dict[str, NDArray[np.uint8]] = {}
     c_img = _bgr(trace.gray // 2 + 64)
@@ -139,11 +155,29 @@ def explain_panels(trace: DetectionTrace, max_candidates: int = 48) -> dict[str,
     return panels
 
 
-def write_explain(trace: DetectionTrace, outdir: str | Path, stem: str = "frame") -> list[Path]:
-    """Write the panels as ``<outdir>/<stem>_<panel>.png`` and a ``<stem>_candidates.json``
-    listing every candidate's bounding box, the stage it stopped at, and its id if decoded.
+def write_explain(trace: DetectionTrace, outdir: str | Path, *, stem: str = "frame") -> list[Path]:
+    """Write the panels of :func:`explain_panels` and a candidate list.
 
-    Returns the written paths.
+    Parameters
+    ----------
+    trace : DetectionTrace
+        One image's stages (:meth:`visloc.markers.MarkerDetector.trace`).
+    outdir : str or Path
+        Output folder, created if missing; files already there are overwritten.
+    stem : str
+        Prefix of the file names.
+
+    Returns
+    -------
+    list of Path
+        The written files: ``<outdir>/<stem>_<panel>.png`` per panel, then
+        ``<stem>_candidates.json``, listing every candidate's bounding box (``[x, y, w, h]``,
+        full-resolution px), the stage it stopped at, and its id if decoded.
+
+    Raises
+    ------
+    OSError
+        If a panel cannot be written.
     """
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)

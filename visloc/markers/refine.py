@@ -74,30 +74,33 @@ def _profile_grid(count: int, end_gap: float, radius: int) -> tuple[NDArray[np.f
 
 
 def sample_edge_profiles(
-    gray: NDArray, quads: NDArray, radius: int, count: int = 24, end_gap: float = 0.15
+    gray: NDArray, quads: NDArray, radius: int, *, count: int = 24, end_gap: float = 0.15
 ) -> tuple[NDArray, NDArray, NDArray]:
     """Sample grey levels along normals across the four sides of each quad.
 
     Parameters
     ----------
     gray : ndarray (H, W) uint8 or float32
-    quads : ndarray (K, 4, 2)
-        Corners clockwise in the image.
+        Grey image (or linear intensity, as stage 8 samples it).
+    quads : ndarray (K, 4, 2) or (4, 2)
+        Corners ``(x, y)``, px (pixel centres at integer coordinates), clockwise in the
+        image; side ``s`` runs from corner ``s`` to corner ``s + 1``.
     radius : int
-        Samples at offsets ``-radius .. radius`` px along the outward normal.
+        Samples at offsets ``-radius .. radius`` px along the outward normal, 1 px apart.
     count : int
-        Profiles per side, evenly spaced.
+        Profiles per side (M), evenly spaced.
     end_gap : float
         Fraction of each side left out at both ends (near corners profiles cross two edges).
 
     Returns
     -------
-    base : ndarray (K, 4, M, 2)
-        Profile centres on each side.
-    normals : ndarray (K, 4, 2)
-        Outward unit normals.
+    base : ndarray (K, 4, M, 2) float64
+        Profile centres ``(x, y)`` on each side, px.
+    normals : ndarray (K, 4, 2) float64
+        Outward unit normals of the sides (image axes, y down).
     profiles : ndarray (K, 4, M, 2 * radius + 1) float32
-        Bilinearly interpolated grey levels, inside (dark) first.
+        Bilinearly interpolated values of ``gray`` (the image's edge pixels repeated beyond
+        it), inside (dark) first.
     """
     q = np.asarray(quads, np.float64).reshape(-1, 4, 2)
     k = len(q)
@@ -116,10 +119,21 @@ def sample_edge_profiles(
 
 
 def edge_offsets(profiles: NDArray, black: NDArray | float, white: NDArray | float) -> NDArray[np.float64]:
-    """Edge position along each profile (..., 2R+1) relative to the profile centre, px,
-    positive outward, from the area of the normalised step (module docstring).
+    """Edge position along each profile from the area of the normalised step (module docstring).
 
-    ``black`` and ``white`` broadcast against ``profiles.shape[:-1]``.
+    Parameters
+    ----------
+    profiles : ndarray (..., 2R + 1)
+        Intensities sampled 1 px apart across an edge, inside (dark) first, centred on the
+        assumed edge (:func:`sample_edge_profiles`), in linear intensity.
+    black, white : float or ndarray
+        Levels of the dark inside and the bright outside, in the units of ``profiles``;
+        they broadcast against ``profiles.shape[:-1]``.
+
+    Returns
+    -------
+    ndarray (...) float64
+        The edge's offset from each profile's centre, px, positive outward.
     """
     radius = (profiles.shape[-1] - 1) // 2
     span = np.maximum(np.asarray(white) - np.asarray(black), 1e-6)
@@ -167,8 +181,9 @@ def refine_quads(
     ----------
     gray : ndarray (H, W) uint8
         The grey image (not the binary one).
-    quads : ndarray (K, 4, 2)
-        Initial corners, clockwise in the image, within about ``radius`` px of the truth.
+    quads : ndarray (K, 4, 2) or (4, 2)
+        Initial corners ``(x, y)``, px (pixel centres at integer coordinates), clockwise in
+        the image, within about ``radius`` px of the truth.
     radius : int or ndarray (K,) of int
         Half-width of the sampled profiles, px, for all quads or per quad. It should not
         exceed the marker's cell size (beyond it the interior bits start) nor its margin.
@@ -190,10 +205,19 @@ def refine_quads(
 
     Returns
     -------
-    corners : ndarray (K, 4, 2)
-        Refined corners in the same order (the input where refinement failed).
+    corners : ndarray (K, 4, 2) float64
+        Refined corners ``(x, y)``, px, in the same order (the input where refinement failed).
     ok : ndarray (K,) bool
         False where a side had too little contrast (4 grey levels) or too few clean profiles.
+
+    Raises
+    ------
+    ValueError
+        If ``gray`` is not a (H, W) uint8 image, a radius is outside 1-64 px, a corner is not
+        finite, ``count < 2`` or ``iterations < 1``, or ``response`` is not a valid response
+        (:func:`~visloc.markers.response.response_lut`).
+    RuntimeError
+        If ``native=True`` and the compiled module was not built.
     """
     if gray.ndim != 2 or gray.dtype != np.uint8:
         raise ValueError(f"gray must be a (H, W) uint8 image, got {gray.shape} {gray.dtype}")
@@ -221,7 +245,7 @@ def refine_quads(
     max_move = 2.0 * r + 1
     ok_all = np.ones(k, bool)
     for it in range(iterations):
-        base, normals, prof = sample_edge_profiles(light, q, big, count, _END_GAP)
+        base, normals, prof = sample_edge_profiles(light, q, big, count=count, end_gap=_END_GAP)
         e, good, lo, hi = _step_offsets(prof, r, big)
         pts = (base + e[..., None] * normals[:, :, None, :]).reshape(k * 4, count, 2)
         w = good.reshape(k * 4, count).astype(np.float64)
@@ -270,8 +294,10 @@ def bend_corners(
     Parameters
     ----------
     gray : ndarray (H, W) uint8
-    quads : ndarray (K, 4, 2)
-        Corners from :func:`refine_quads`, clockwise.
+        The grey image.
+    quads : ndarray (K, 4, 2) or (4, 2)
+        Corners ``(x, y)``, px (pixel centres at integer coordinates), from
+        :func:`refine_quads`, clockwise.
     radius : int or ndarray (K,) of int
         Profile half-width, px (as in :func:`refine_quads`).
     count : int
@@ -283,8 +309,14 @@ def bend_corners(
 
     Returns
     -------
-    ndarray (K, 4, 2)
-        The corners; a quad whose curves do not meet near its corners keeps them.
+    ndarray (K, 4, 2) float64
+        The corners ``(x, y)``, px; a quad whose curves do not meet near its corners keeps
+        them.
+
+    Raises
+    ------
+    ValueError
+        If ``response`` is not a valid response (:func:`~visloc.markers.response.response_lut`).
     """
     q = np.asarray(quads, np.float64).reshape(-1, 4, 2)
     k = len(q)
@@ -297,7 +329,7 @@ def bend_corners(
     x0, y0 = (np.floor(q.reshape(-1, 2).min(axis=0)) - big - 2).astype(int).clip(0)
     x1, y1 = np.minimum((np.ceil(q.reshape(-1, 2).max(axis=0)) + big + 3).astype(int), [w_img, h])
     light = _to_light(gray[y0:y1, x0:x1], response)
-    _, normals, prof = sample_edge_profiles(light, q - [x0, y0], big, count, end_gap)
+    _, normals, prof = sample_edge_profiles(light, q - [x0, y0], big, count=count, end_gap=end_gap)
     e, good, _, _ = _step_offsets(prof, r, big)  # offsets of the edge from the sides, px
     w = good.astype(np.float64)
     t = np.linspace(end_gap, 1 - end_gap, count)

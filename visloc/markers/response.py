@@ -28,8 +28,18 @@ RESPONSES = ("srgb", "linear")
 
 
 def srgb_to_linear(v: NDArray | float) -> NDArray[np.float64]:
-    """The sRGB decoding curve on values in [0, 1]: ``v / 12.92`` up to 0.04045, else
-    ``((v + 0.055) / 1.055) ** 2.4``."""
+    """The sRGB decoding curve: ``v / 12.92`` up to 0.04045, else ``((v + 0.055) / 1.055) ** 2.4``.
+
+    Parameters
+    ----------
+    v : float or ndarray, any shape
+        sRGB-encoded values on a 0-1 scale (not clipped).
+
+    Returns
+    -------
+    ndarray float64, the shape of ``v``
+        Linear light on a 0-1 scale (a 0-d array for a scalar ``v``).
+    """
     v = np.asarray(v, np.float64)
     return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
 
@@ -48,15 +58,27 @@ def _lut(response: str | float) -> NDArray[np.float64]:
 
 
 def response_lut(response: str | float | NDArray) -> NDArray[np.float64]:
-    """Linear intensity (0-255 scale) of each 8-bit grey level, ``(256,)`` float64, read-only.
+    """Linear intensity (0-255 scale) of each 8-bit grey level.
 
     Parameters
     ----------
     response : {"srgb", "linear"}, float or ndarray (256,)
         The camera's transfer curve: ``"srgb"`` for images as cameras and most files store
-        them, ``"linear"`` for linear sensor data and linear renders, a gamma ``g > 0``
-        (grey level ``v`` holds light ``(v / 255) ** g``), or the table itself (strictly
-        increasing).
+        them, ``"linear"`` for linear sensor data and linear renders, a gamma ``g`` in
+        (0, 10) (grey level ``v`` holds light ``255 (v / 255) ** g``), or the table itself
+        (256 strictly increasing values).
+
+    Returns
+    -------
+    ndarray (256,) float64
+        Entry ``v``: the light of grey level ``v`` on a 0-255 scale. Read-only (cached) for a
+        name or a gamma; a given table is returned as float64 (itself when it already is).
+
+    Raises
+    ------
+    ValueError
+        An unknown name, a gamma outside (0, 10) (or not a number), or a table that is not
+        256 strictly increasing values.
     """
     if isinstance(response, np.ndarray):
         lut = np.asarray(response, np.float64)

@@ -101,12 +101,16 @@ def fit_propulsion(
     Returns
     -------
     PropulsionFit
+        ``c`` (M,) in N/%^2, ``d`` (J,) in N m/%^2, the shared ``k`` in percent, with the fit's
+        ``a, b`` and RMS residuals (percent).
 
     Raises
     ------
     ValueError
         On bad shapes, non-positive commands, negative measurements or negative weights, or
         when the data do not determine every parameter (a motor with fewer than two samples).
+    TypeError
+        ``pwm``, ``thrust`` or ``torque`` not real numbers.
     """
     try:
         p = np.asarray(pwm, dtype=float)
@@ -189,8 +193,13 @@ def mean_std(values: ArrayLike, *, ddof: int = 1) -> tuple[float, float]:
 
     Returns
     -------
-    (float, float)
+    mean, std : float
         Mean and standard deviation in the unit of ``values``.
+
+    Raises
+    ------
+    ValueError
+        Not more than ``ddof`` non-NaN entries.
     """
     v = np.asarray(values, dtype=float).ravel()
     v = v[~np.isnan(v)]

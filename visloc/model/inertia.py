@@ -30,7 +30,7 @@ def _positive(value: ArrayLike, name: str) -> FloatArray:
 
 
 def bifilar_inertia(
-    m: ArrayLike, r: ArrayLike, L: ArrayLike, f: ArrayLike, g: float = 9.81
+    m: ArrayLike, r: ArrayLike, L: ArrayLike, f: ArrayLike, *, g: float = 9.81
 ) -> FloatArray | float:
     """Moment of inertia about the pendulum's vertical axis, ``I = m g r^2 / (4 pi^2 L f^2)``.
 
@@ -51,7 +51,15 @@ def bifilar_inertia(
     Returns
     -------
     float or ndarray
-        Moment of inertia, kg m^2 (report eqs. 2.14, D.13); arrays broadcast.
+        Moment of inertia, kg m^2 (report eqs. 2.14, D.13): a float when every input is a
+        scalar, else an array of the broadcast shape.
+
+    Raises
+    ------
+    TypeError
+        An argument is not real numbers.
+    ValueError
+        An argument has a value that is not finite and > 0.
     """
     m, r, L, f = (_positive(v, n) for v, n in ((m, "m"), (r, "r"), (L, "L"), (f, "f")))
     g = float(_positive(g, "g"))
@@ -83,16 +91,24 @@ def inertia_from_measurements(rows: ArrayLike, *, g: float = 9.81) -> BifilarRes
 
     Parameters
     ----------
-    rows : array_like (N, 5)
+    rows : array_like (N, 5) or (5,)
         Per row: mass ``m`` (kg), half the distance between the cords ``r`` (m), cord length
-        ``L`` (m), time ``t`` of ``n`` oscillations (s), number of oscillations ``n``.
+        ``L`` (m), time ``t`` of ``n`` oscillations (s), number of oscillations ``n``; a
+        single row may be given as (5,).
     g : float
         Gravitational acceleration, m/s^2.
 
     Returns
     -------
     BifilarResult
-        ``f = n / t`` per row, the inertia of each row and their mean.
+        ``f = n / t`` per row (Hz), the inertia of each row and their mean (kg m^2).
+
+    Raises
+    ------
+    TypeError
+        ``rows`` or ``g`` not real numbers.
+    ValueError
+        ``rows`` not (N, 5) with N >= 1; an entry of ``rows`` or ``g`` not finite and > 0.
     """
     try:
         arr = np.asarray(rows, dtype=float)
@@ -105,5 +121,5 @@ def inertia_from_measurements(rows: ArrayLike, *, g: float = 9.81) -> BifilarRes
     _positive(arr, "rows")
     m, r, L, t, n = arr.T
     f = n / t  # App. D nomenclature: n oscillations during measure time t
-    inertia = np.atleast_1d(bifilar_inertia(m, r, L, f, g))
+    inertia = np.atleast_1d(bifilar_inertia(m, r, L, f, g=g))
     return BifilarResult(f=f, inertia=inertia, mean=float(inertia.mean()))

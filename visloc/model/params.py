@@ -156,7 +156,25 @@ ARDRONE2 = ARDrone2Params()
 
 
 def check_params(params: object, name: str = "params") -> ARDrone2Params:
-    """Raise ``TypeError`` unless ``params`` is an :class:`ARDrone2Params`; return it."""
+    """Check that ``params`` is an :class:`ARDrone2Params` and return it.
+
+    Parameters
+    ----------
+    params : object
+        The value to check.
+    name : str
+        The argument's name, for the error message.
+
+    Returns
+    -------
+    ARDrone2Params
+        ``params`` itself.
+
+    Raises
+    ------
+    TypeError
+        ``params`` is not an :class:`ARDrone2Params`.
+    """
     if not isinstance(params, ARDrone2Params):
         raise TypeError(f"{name}: expected ARDrone2Params, got {type(params).__name__}")
     return params

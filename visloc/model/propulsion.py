@@ -62,6 +62,13 @@ def pwm_bar(pwm: ArrayLike, k: float) -> FloatArray:
     -------
     ndarray
         ``pwm_bar`` with the shape of ``pwm``, %^2 (report eqs. 2.9, 2.17-2.18).
+
+    Raises
+    ------
+    TypeError
+        ``pwm`` or ``k`` not real numbers.
+    ValueError
+        ``pwm`` or ``k`` not finite, or ``k`` not a scalar.
     """
     p = _as_float_array(pwm, "pwm")
     k_arr = _as_float_array(k, "k")
@@ -86,7 +93,12 @@ def thrust(pwm: ArrayLike, c: ArrayLike, k: float) -> FloatArray:
     Returns
     -------
     ndarray
-        Thrust, N (report eqs. 2.15, 2.17).
+        Thrust, N (report eqs. 2.15, 2.17), of the broadcast shape of ``pwm`` and ``c``.
+
+    Raises
+    ------
+    TypeError, ValueError
+        As for :func:`pwm_bar`, and for ``c``.
     """
     c = _as_float_array(c, "c")
     return c * pwm_bar(pwm, k)  # report eq. (2.15)
@@ -109,7 +121,13 @@ def torque(pwm: ArrayLike, d: ArrayLike, k: float) -> FloatArray:
     Returns
     -------
     ndarray
-        Torque magnitude, N m (report eqs. 2.16, 2.18).
+        Torque magnitude, N m (report eqs. 2.16, 2.18), of the broadcast shape of ``pwm`` and
+        ``d``.
+
+    Raises
+    ------
+    TypeError, ValueError
+        As for :func:`pwm_bar`, and for ``d``.
     """
     d = _as_float_array(d, "d")
     return d * pwm_bar(pwm, k)  # report eq. (2.16)
@@ -144,7 +162,10 @@ def mixer_matrix(
     Raises
     ------
     ValueError
-        If no arm distance is known or an argument has the wrong shape or sign.
+        If no arm distance is known or an argument has the wrong shape or sign, or is not
+        finite.
+    TypeError
+        ``params`` is not an :class:`ARDrone2Params`, or ``c`` / ``d`` not real numbers.
     """
     check_params(params)
     c = params.c_motors if c is None else _as_vector(c, "c", 4)
@@ -189,6 +210,14 @@ def inputs_from_pwm(
     -------
     ndarray (4,)
         ``[T, tau_x, tau_y, tau_z]`` in N and N m (report eq. 2.11).
+
+    Raises
+    ------
+    ValueError
+        ``pwm`` not (4,) or not finite; ``gamma`` not (4, 4) or not finite; no ``gamma`` and
+        no arm distance in ``params`` (:func:`mixer_matrix`).
+    TypeError
+        ``params`` is not an :class:`ARDrone2Params`; ``pwm`` or ``gamma`` not real numbers.
     """
     check_params(params)
     p = _as_vector(pwm, "pwm", 4)
@@ -246,6 +275,16 @@ def pwm_from_inputs(
     Returns
     -------
     PwmResult
+        ``pwm`` (4,) of motors 1-4, percent, in ``[0, pwm_max]``; ``saturated`` and
+        ``reason`` for clipped motors; ``pwm_bar`` (4,) the requested ``Gamma^-1 u``, %^2.
+
+    Raises
+    ------
+    ValueError
+        ``u`` not (4,) or not finite; ``pwm_max`` not a finite number > 0; ``gamma`` not (4, 4),
+        not finite or singular; no ``gamma`` and no arm distance in ``params``.
+    TypeError
+        ``params`` is not an :class:`ARDrone2Params`; ``u`` or ``gamma`` not real numbers.
     """
     check_params(params)
     u = _as_vector(u, "u", 4)
@@ -275,7 +314,7 @@ def pwm_from_inputs(
     return PwmResult(pwm=pwm, saturated=bool(reasons), reason="; ".join(reasons), pwm_bar=s)
 
 
-def hover_pwm(params: ARDrone2Params, mass: float | None = None) -> float:
+def hover_pwm(params: ARDrone2Params, *, mass: float | None = None) -> float:
     """Command of each motor in hover: ``sqrt(m g / (4 c_mean)) - k``, percent.
 
     Parameters
@@ -290,6 +329,13 @@ def hover_pwm(params: ARDrone2Params, mass: float | None = None) -> float:
     float
         Trim command, percent: each motor gives ``T0 / 4`` with ``T0 = m g`` (report
         section 4.1) through eq. (2.15) with the mean coefficient.
+
+    Raises
+    ------
+    ValueError
+        ``mass`` not a finite number > 0.
+    TypeError
+        ``params`` is not an :class:`ARDrone2Params`.
     """
     check_params(params)
     m = params.mass if mass is None else mass

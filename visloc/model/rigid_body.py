@@ -55,7 +55,14 @@ def rotation_matrix(lam: ArrayLike) -> FloatArray:
     Returns
     -------
     ndarray (3, 3)
-        ``R`` with ``v_A = R @ v_B``.
+        ``R`` with ``v_A = R @ v_B`` (body frame B into the inertial NED frame A).
+
+    Raises
+    ------
+    TypeError
+        ``lam`` not real numbers.
+    ValueError
+        ``lam`` not (3,) or not finite.
     """
     phi, theta, psi = _vector(lam, "lam", 3)
     cf, sf = math.cos(phi), math.sin(phi)
@@ -81,6 +88,15 @@ def euler_rate_matrix(lam: ArrayLike) -> FloatArray:
     Returns
     -------
     ndarray (3, 3)
+        ``Q`` mapping the body rates ``omega = [p, q, r]`` (rad/s, body frame) to the Euler
+        angle rates ``[phidot, thetadot, psidot]`` (rad/s).
+
+    Raises
+    ------
+    TypeError
+        ``lam`` not real numbers.
+    ValueError
+        ``lam`` not (3,) or not finite, or ``cos(theta)`` below 1e-9 (the Z-Y-X singularity).
     """
     phi, theta, _ = _vector(lam, "lam", 3)
     ct = math.cos(theta)
@@ -123,6 +139,15 @@ def derivatives(
     -------
     ndarray (12,)
         ``d state / dt`` in the units of ``state`` per second.
+
+    Raises
+    ------
+    TypeError
+        ``state`` or ``u`` not real numbers, ``params`` not an :class:`ARDrone2Params`,
+        ``gyroscopic`` not a bool.
+    ValueError
+        ``state`` not (12,) or ``u`` not (4,), a NaN or infinite entry, or ``theta`` at the
+        Z-Y-X singularity (:func:`euler_rate_matrix`).
     """
     s = _vector(state, "state", 12)
     u = _vector(u, "u", 4)
@@ -130,10 +155,10 @@ def derivatives(
     if not isinstance(gyroscopic, bool):
         raise TypeError(f"gyroscopic: expected bool, got {type(gyroscopic).__name__}")
     euler_rate_matrix(s[6:9])  # raises at the Z-Y-X singularity
-    return rhs(s, u, p.mass, p.g, np.array([p.Ixx, p.Iyy, p.Izz]), gyroscopic)
+    return rhs(s, u, p.mass, p.g, np.array([p.Ixx, p.Iyy, p.Izz]), gyroscopic=gyroscopic)
 
 
-def rhs(state: FloatArray, u: FloatArray, mass: float, g: float, inertia: FloatArray,
+def rhs(state: FloatArray, u: FloatArray, mass: float, g: float, inertia: FloatArray, *,
         gyroscopic: bool = False) -> FloatArray:
     """:func:`derivatives` without input checks, for integrators that call it many times.
 
@@ -153,6 +178,7 @@ def rhs(state: FloatArray, u: FloatArray, mass: float, g: float, inertia: FloatA
     Returns
     -------
     ndarray (12,)
+        ``d state / dt`` in the units of ``state`` per second.
     """
     phi, theta, psi = state[6], state[7], state[8]
     omega = state[9:12]
@@ -199,6 +225,14 @@ def motor_lag_derivative(pwm_bar: ArrayLike, pwm_bar_cmd: ArrayLike, tau_c: floa
     -------
     ndarray (4,)
         ``d pwm_bar / dt``, %^2/s; ``mixer @ pwm_bar`` gives the lagged ``u``.
+
+    Raises
+    ------
+    TypeError
+        ``pwm_bar`` or ``pwm_bar_cmd`` not real numbers.
+    ValueError
+        ``pwm_bar`` or ``pwm_bar_cmd`` not (4,) or not finite; ``tau_c`` not a finite number
+        > 0.
     """
     x = _vector(pwm_bar, "pwm_bar", 4)
     cmd = _vector(pwm_bar_cmd, "pwm_bar_cmd", 4)

@@ -43,7 +43,27 @@ def _arm(l: float) -> float:
 
 
 def stand_inertia(params: ARDrone2Params, l: float) -> FloatArray:
-    """Moments of inertia about the joint ``[Ixx + m l^2, Iyy + m l^2, Izz]`` (3,), kg m^2."""
+    """Moments of inertia about the joint, ``[Ixx + m l^2, Iyy + m l^2, Izz]`` (parallel axes).
+
+    Parameters
+    ----------
+    params : ARDrone2Params
+        Mass (kg) and ``Ixx, Iyy, Izz`` (kg m^2).
+    l : float
+        Joint distance along body z, m (module docstring for its sign).
+
+    Returns
+    -------
+    ndarray (3,)
+        Moments of inertia about the body x, y, z axes through the joint, kg m^2.
+
+    Raises
+    ------
+    TypeError
+        ``params`` is not an :class:`ARDrone2Params`.
+    ValueError
+        ``l`` is not a finite number.
+    """
     p = check_params(params)
     arm = _arm(l)
     return np.array([p.Ixx + p.mass * arm**2, p.Iyy + p.mass * arm**2, p.Izz])
@@ -64,7 +84,14 @@ def stand_gravity_torque(lam: ArrayLike, params: ARDrone2Params, l: float) -> Fl
     Returns
     -------
     ndarray (3,)
-        ``m g l [cos(theta) sin(phi), sin(theta), 0]``.
+        ``m g l [cos(theta) sin(phi), sin(theta), 0]``, N m, body axes.
+
+    Raises
+    ------
+    TypeError
+        ``lam`` not real numbers, or ``params`` not an :class:`ARDrone2Params`.
+    ValueError
+        ``lam`` not (3,) or not finite; ``l`` not a finite number.
     """
     phi, theta, _ = _vector(lam, "lam", 3)
     p = check_params(params)
@@ -79,9 +106,11 @@ def stand_derivatives(state: ArrayLike, u: ArrayLike, params: ARDrone2Params, *,
     Parameters
     ----------
     state : array_like (6,)
-        ``[phi, theta, psi, p, q, r]`` (eq. C.10).
+        ``[phi, theta, psi, p, q, r]`` (eq. C.10): Z-Y-X Euler angles (rad) and body rates
+        (rad/s).
     u : array_like (4,)
-        ``[T, tau_x, tau_y, tau_z]`` (eq. C.11); ``T`` acts through the joint and is ignored.
+        ``[T, tau_x, tau_y, tau_z]`` (eq. C.11), N and N m (body axes); ``T`` acts through the
+        joint and is ignored.
     params : ARDrone2Params
         Mass, inertia, ``g``.
     l : float
@@ -93,6 +122,16 @@ def stand_derivatives(state: ArrayLike, u: ArrayLike, params: ARDrone2Params, *,
     Returns
     -------
     ndarray (6,)
+        ``d state / dt``: Euler angle rates (rad/s) and body angular accelerations (rad/s^2).
+
+    Raises
+    ------
+    TypeError
+        ``state`` or ``u`` not real numbers, ``params`` not an :class:`ARDrone2Params`,
+        ``gyroscopic`` not a bool.
+    ValueError
+        ``state`` not (6,) or ``u`` not (4,), or not finite; ``l`` not a finite number;
+        ``theta`` at the Z-Y-X singularity.
     """
     s = _vector(state, "state", 6)
     inputs = _vector(u, "u", 4)
@@ -108,11 +147,31 @@ def stand_derivatives(state: ArrayLike, u: ArrayLike, params: ARDrone2Params, *,
 
 
 def stand_linear(params: ARDrone2Params, l: float) -> tuple[FloatArray, FloatArray]:
-    """``(A, B)`` (6, 6), (6, 4) of the stand model at rest upright (report eq. C.9).
+    """The linear stand model ``x' = A x + B u`` at rest upright (report eq. C.9).
 
-    ``A`` couples the angles to the rates (identity block) and tilts to torques with ``m g l /
-    (I + m l^2)``; ``B`` maps ``tau_x, tau_y, tau_z`` through the inverse inertia about the joint
-    (its thrust column is zero).
+    Parameters
+    ----------
+    params : ARDrone2Params
+        Mass, inertia, ``g``.
+    l : float
+        Joint distance along body z, m (module docstring for its sign).
+
+    Returns
+    -------
+    A : ndarray (6, 6)
+        Couples the angles to the rates (identity block) and the roll and pitch tilts to the
+        angular accelerations with ``m g l / (I + m l^2)`` (1/s^2); state order
+        :data:`STAND_STATE_NAMES`.
+    B : ndarray (6, 4)
+        Maps ``u = [T, tau_x, tau_y, tau_z]`` (N, N m) through the inverse inertia about the
+        joint (1/(kg m^2)); its thrust column is zero.
+
+    Raises
+    ------
+    TypeError
+        ``params`` is not an :class:`ARDrone2Params`.
+    ValueError
+        ``l`` is not a finite number.
     """
     p = check_params(params)
     inertia = stand_inertia(p, l)

@@ -57,10 +57,23 @@ _CROSS = np.array(
 
 
 def rotations_and_rates(params: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """``R = Rz(psi) Ry(theta) Rx(phi)`` (S, 3, 3) and ``W`` (S, 3, 3), whose columns turn
-    Euler rates into a rotation vector: ``w = R e_x dphi + Rz(psi) e_y dtheta + e_z dpsi``.
+    """Rotation matrices of parameter vectors and the matrices that turn Euler rates into
+    rotation vectors.
 
     Scalar code: S is a handful and numpy's per-call cost would dominate.
+
+    Parameters
+    ----------
+    params : ndarray (S, 6)
+        ``[tx, ty, tz, phi, theta, psi]`` (angles in rad; only they are read).
+
+    Returns
+    -------
+    R : ndarray (S, 3, 3)
+        ``R = Rz(psi) Ry(theta) Rx(phi)``: object frame into camera frame.
+    W : ndarray (S, 3, 3)
+        Columns ``R e_x``, ``Rz(psi) e_y`` and ``e_z``: the small rotation (camera frame, rad)
+        of angle changes ``d = [dphi, dtheta, dpsi]`` (rad) is ``w = W d``.
     """
     R = []
     W = []
@@ -98,19 +111,25 @@ def _project(
 def reprojection_residuals(
     params: FloatArray, X: FloatArray, xy: FloatArray, f: FloatArray
 ) -> FloatArray:
-    """Residuals (S, 2N) ``[du_0..du_N-1, dv_0..dv_N-1]`` in pixels; ``inf`` for a start
-    that puts any point behind the camera.
+    """Reprojection residuals of S parameter vectors.
 
     Parameters
     ----------
-    params : (S, 6)
-        ``[tx, ty, tz, phi, theta, psi]``.
-    X : (3, N)
-        Object points, columns.
-    xy : (2, N)
-        Observed normalized image coordinates, columns.
-    f : (2, 1)
-        ``[[fx], [fy]]``.
+    params : ndarray (S, 6)
+        ``[tx, ty, tz, phi, theta, psi]``: object frame into camera frame, translation in the
+        unit of ``X``, ``R = Rz(psi) Ry(theta) Rx(phi)`` (rad).
+    X : ndarray (3, N)
+        Object points, columns, object frame.
+    xy : ndarray (2, N)
+        Observed normalized image coordinates (undistorted, ``K^-1``), columns.
+    f : ndarray (2, 1)
+        ``[[fx], [fy]]``, px: the residuals' weights (1 gives normalized units).
+
+    Returns
+    -------
+    ndarray (S, 2N)
+        ``[du_0..du_N-1, dv_0..dv_N-1]`` = ``f * (projected - observed)``, px; every entry of
+        a start that puts any point behind the camera is ``inf``.
     """
     _, uv, iz, behind = _project(params, X)
     r = ((uv - xy) * f).reshape(len(params), -1)
@@ -122,9 +141,22 @@ def reprojection_residuals(
 def residuals_and_jacobian(
     params: FloatArray, X: FloatArray, xy: FloatArray, f: FloatArray
 ) -> FloatArray:
-    """``E = [J | r]`` (S, 2N, 7): the analytic Jacobian d r / d params in its first six
-    columns and the residuals of :func:`reprojection_residuals` in the last, so that
-    ``E^T E`` holds ``J^T J``, ``J^T r`` and ``r^T r`` at once."""
+    """The analytic Jacobian and the residuals of S parameter vectors at once.
+
+    Parameters
+    ----------
+    params, X, xy, f
+        As for :func:`reprojection_residuals`.
+
+    Returns
+    -------
+    ndarray (S, 2N, 7)
+        ``E = [J | r]``: the Jacobian ``d r / d params`` (px per unit of ``X`` for the
+        translation, px/rad for the angles) in its first six columns and the residuals of
+        :func:`reprojection_residuals` (px) in the last, so that ``E^T E`` holds ``J^T J``,
+        ``J^T r`` and ``r^T r`` at once. The last column is ``inf`` for a start that puts any
+        point behind the camera.
+    """
     S = params.shape[0]
     N = X.shape[1]
     R, W = rotations_and_rates(params)
@@ -150,7 +182,7 @@ def residuals_and_jacobian(
 
 
 def levenberg_marquardt(
-    params: FloatArray, X: FloatArray, xy: FloatArray, f: FloatArray, max_iter: int, *, native: bool | None = None
+    params: FloatArray, X: FloatArray, xy: FloatArray, f: FloatArray, *, max_iter: int, native: bool | None = None
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Refine S starts at once.
 
@@ -165,22 +197,33 @@ def levenberg_marquardt(
 
     Parameters
     ----------
-    params : (S, 6)
+    params : array_like (S, 6)
+        Starting parameter vectors (see :func:`reprojection_residuals`); not modified.
     X, xy, f
-        As for :func:`reprojection_residuals`.
+        As for :func:`reprojection_residuals`, with N >= 1.
     max_iter : int
+        Most iterations (>= 0; 0 evaluates ``sse`` and ``M`` at ``params``).
     native : bool or None
         Run the compiled version (``True``) or the numpy one (``False``); ``None``: the
         compiled one when it was built (:data:`NATIVE_LM`).
 
     Returns
     -------
-    params : (S, 6)
-    sse : (S,)
+    params : ndarray (S, 6)
+        Refined parameter vectors.
+    sse : ndarray (S,)
         Sum of squared residuals, px^2 (``inf`` for a start behind the camera).
-    M : (S, 7, 7)
+    M : ndarray (S, 7, 7)
         ``E^T E`` at the result (see :func:`residuals_and_jacobian`): ``M[:, :6, :6]`` is
         ``J^T J``.
+
+    Raises
+    ------
+    ValueError
+        ``params`` not (S, 6), ``X`` not (3, N) with N >= 1, ``xy`` not (2, N), ``f`` not
+        (2, 1), or ``max_iter`` not a whole number >= 0.
+    RuntimeError
+        ``native=True`` but the compiled version was not built.
     """
     x = np.array(params, dtype=np.float64)
     S = len(x)
@@ -263,9 +306,10 @@ def refine_params(
     ----------
     params : array_like (6,) or (S, 6)
         Starting parameter vectors ``[tx, ty, tz, phi, theta, psi]`` (object frame into
-        camera frame, ``R = Rz(psi) Ry(theta) Rx(phi)``).
+        camera frame, translation in the unit of ``object_points``, ``R = Rz(psi) Ry(theta)
+        Rx(phi)`` in rad).
     object_points : array_like (N, 3)
-        Points in the object frame, N >= 3.
+        Points in the object frame (e.g. m), N >= 3.
     xy : array_like (N, 2)
         Their observed normalized image coordinates (undistorted, ``K^-1``).
     fx, fy : float
@@ -280,6 +324,12 @@ def refine_params(
     sse : float or ndarray (S,)
         Sum of squared residuals (px^2 with ``fx, fy``); ``inf`` where a point ended behind
         the camera.
+
+    Raises
+    ------
+    ValueError
+        ``params`` not (6,) or (S, 6), ``object_points`` not (N, 3) with N >= 3, ``xy`` not
+        (N, 2), or ``max_iter`` not a whole number >= 0.
     """
     x = np.array(params, dtype=np.float64)
     single = x.ndim == 1
@@ -293,7 +343,7 @@ def refine_params(
     if uv.shape != (X.shape[0], 2):
         raise ValueError(f"xy must have shape ({X.shape[0]}, 2), got {uv.shape}")
     f = np.array([[fx], [fy]], dtype=np.float64)
-    x, sse, _ = levenberg_marquardt(x, X.T.copy(), uv.T.copy(), f, int(max_iter))
+    x, sse, _ = levenberg_marquardt(x, X.T.copy(), uv.T.copy(), f, max_iter=int(max_iter))
     if single:
         return x[0], float(sse[0])
     return x, sse

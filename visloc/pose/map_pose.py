@@ -114,9 +114,12 @@ def estimate_camera_pose(
     Parameters
     ----------
     detections : list of MarkerDetection
-        Markers found in the image (ids not in the map are ignored and listed).
+        Markers found in the image, corners in pixels (ids not in the map are ignored and
+        listed).
     marker_map : MarkerMap
+        The markers' corners in the map frame, m.
     camera : Camera
+        Intrinsics of the image; the corners are undistorted once.
     pixel_sigma : float, optional
         Corner noise (px) for the covariance; default estimated from the residuals.
     max_residual : float
@@ -132,7 +135,17 @@ def estimate_camera_pose(
     Returns
     -------
     MapPose or None
-        None when no marker of the map was seen.
+        ``T_cam_map`` (``p_cam = R @ p_map + t``, m) with its covariance and the markers
+        used, rejected and unknown; None when no marker of the map was seen or none gave a
+        start in front of the camera.
+
+    Raises
+    ------
+    TypeError
+        ``marker_map`` is not a :class:`MarkerMap` or ``camera`` not a :class:`Camera`.
+    ValueError
+        ``pixel_sigma`` (unless None) or ``max_residual`` not a finite number > 0;
+        ``max_iter`` or ``n_starts`` not a whole number > 0.
     """
     if not isinstance(marker_map, MarkerMap):
         raise TypeError(f"marker_map must be a MarkerMap, got {type(marker_map).__name__}")
@@ -191,7 +204,7 @@ def estimate_camera_pose(
         rejected.append(ids[worst])
         params = best[None]
     X = obj[keep].reshape(-1, 3)
-    M = levenberg_marquardt(best[None], X.T, xy[keep].reshape(-1, 2).T, f, 0)[2][0]  # [J | r]^T [J | r]
+    M = levenberg_marquardt(best[None], X.T, xy[keep].reshape(-1, 2).T, f, max_iter=0)[2][0]  # [J | r]^T [J | r]
     n = 2 * X.shape[0]
     rms = float(np.sqrt(M[6, 6] / n))
     cov = _covariance(M, n, pixel_sigma)

@@ -164,7 +164,7 @@ class MarkerMap:
         return cls.from_list(items, dictionary)
 
 
-def GridMap(rows: int, cols: int, marker_length: float, spacing: float, first_id: int = 0, *,
+def GridMap(rows: int, cols: int, marker_length: float, spacing: float, *, first_id: int = 0,
             dictionary: str | None = None) -> MarkerMap:
     """A ``rows x cols`` grid of square markers in the map's z = 0 plane.
 
@@ -185,6 +185,19 @@ def GridMap(rows: int, cols: int, marker_length: float, spacing: float, first_id
         Id of the top-left marker (>= 0).
     dictionary : str, optional
         The markers' dictionary, recorded with the map (:class:`MarkerMap`).
+
+    Returns
+    -------
+    MarkerMap
+        ``rows * cols`` markers with ids ``first_id`` to ``first_id + rows * cols - 1``,
+        corners in the map frame above, m.
+
+    Raises
+    ------
+    ValueError
+        ``rows`` or ``cols`` not an integer >= 1, ``marker_length`` not finite and > 0,
+        ``spacing`` not finite and >= 0, ``first_id`` < 0, or ``dictionary`` neither None nor a
+        non-empty str.
     """
     for name, v in (("rows", rows), ("cols", cols)):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:

@@ -43,12 +43,27 @@ _SQUARE_T = np.vstack([SQUARE.T, np.zeros((1, 4))])  # (3, 4) corners in half-si
 
 
 def yaw_seed_start(xy: ArrayLike, marker_length: float) -> FloatArray:
-    """The best of the report's four yaw guesses (:func:`~visloc.pose.planar.yaw_seeds`),
-    (6,) ``[x y z phi theta psi]``: "the guess with the smallest error is used as the initial
-    value for the iterative optimization process" (report Appendix G).
+    """The best of the report's four yaw guesses (:func:`~visloc.pose.planar.yaw_seeds`):
+    "the guess with the smallest error is used as the initial value for the iterative
+    optimization process" (report Appendix G).
 
-    ``xy`` (4, 2) are normalized corner coordinates; the error is measured in normalized
-    units.
+    Parameters
+    ----------
+    xy : array_like (4, 2)
+        Normalized image coordinates (undistorted, ``K^-1``) of the corners, OpenCV order;
+        the reprojection error is measured in these normalized units.
+    marker_length : float
+        Side of the marker, m.
+
+    Returns
+    -------
+    ndarray (6,)
+        ``[x y z phi theta psi]``: marker frame into camera frame, m and rad.
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        The corners enclose no area.
     """
     xy = np.asarray(xy, dtype=np.float64)
     seeds = yaw_seeds(xy, marker_length)
@@ -174,17 +189,17 @@ def estimate_marker_pose(
     if with_yaw:
         starts.append(_yaw_start(xy, L, c))  # report App. G: best of four yaw guesses
     # report §3.2.2 / App. G: Gauss-Newton on the reprojection error over [x y z phi theta psi]
-    params, sse, M = levenberg_marquardt(np.array(starts), X, xyT, f, max_iter)
+    params, sse, M = levenberg_marquardt(np.array(starts), X, xyT, f, max_iter=max_iter)
     if start == "auto" and not with_yaw and not np.isfinite(sse).any():
         # the planar solutions ended behind the camera: fall back on the report's yaw guess
-        params, sse, M = levenberg_marquardt(_yaw_start(xy, L, c)[None], X, xyT, f, max_iter)
+        params, sse, M = levenberg_marquardt(_yaw_start(xy, L, c)[None], X, xyT, f, max_iter=max_iter)
     if not np.isfinite(sse).any():
         raise ValueError(f"no pose puts all corners in front of the camera: {c.tolist()}")
 
     # Pose.params uses the branch theta in [-pi/2, pi/2]; the covariance must match it
     if (np.cos(params[:, 4]) < 0.0).any():
         params[:, 3:] = matrix_to_euler(rotations_and_rates(params)[0])
-        _, _, M = levenberg_marquardt(params, X, xyT, f, 0)
+        _, _, M = levenberg_marquardt(params, X, xyT, f, max_iter=0)
     R = rotations_and_rates(params)[0]
 
     order = [int(i) for i in np.argsort(sse, kind="stable") if np.isfinite(sse[i])]
@@ -259,8 +274,29 @@ def _covariances(M: FloatArray, pixel_sigma: float | None) -> list[FloatArray | 
 
 
 def pose_error(pose: Pose, R_true: ArrayLike, t_true: ArrayLike) -> tuple[float, float]:
-    """Rotation error (rad: the angle of ``R^T R_true``) and translation error (m:
-    ``|t - t_true|``) of ``pose``."""
+    """Rotation and translation error of ``pose`` against a known true pose.
+
+    Parameters
+    ----------
+    pose : Pose
+        Estimated pose (e.g. ``T_cam_marker``).
+    R_true : array_like (3, 3)
+        True rotation, same frames as ``pose.R``.
+    t_true : array_like (3,)
+        True translation, same frames and unit as ``pose.t`` (e.g. m); any shape of 3 entries.
+
+    Returns
+    -------
+    rotation_error : float
+        Angle of ``R^T R_true``, rad, in [0, pi].
+    translation_error : float
+        ``|t - t_true|``, in the unit of ``t`` (m for visloc's poses).
+
+    Raises
+    ------
+    ValueError
+        ``R_true`` not (3, 3) or ``t_true`` without 3 entries.
+    """
     R_true = np.asarray(R_true, dtype=np.float64)
     t_true = np.asarray(t_true, dtype=np.float64)
     if R_true.shape != (3, 3):
@@ -271,8 +307,26 @@ def pose_error(pose: Pose, R_true: ArrayLike, t_true: ArrayLike) -> tuple[float,
 
 
 def is_flip(pose: Pose, R_true: ArrayLike) -> bool:
-    """Whether ``pose`` took the wrong planar solution: its ``alternative`` is closer in
-    rotation to ``R_true`` than the pose itself."""
+    """Whether ``pose`` took the wrong planar solution.
+
+    Parameters
+    ----------
+    pose : Pose
+        Estimated pose with its ``alternative`` (:func:`estimate_marker_pose`).
+    R_true : array_like (3, 3)
+        True rotation, same frames as ``pose.R``.
+
+    Returns
+    -------
+    bool
+        True when ``pose.alternative`` is closer in rotation to ``R_true`` than the pose
+        itself; False when there is no alternative.
+
+    Raises
+    ------
+    ValueError
+        ``R_true`` not (3, 3) (when ``pose`` has an alternative).
+    """
     if pose.alternative is None:
         return False
     R_true = np.asarray(R_true, dtype=np.float64)

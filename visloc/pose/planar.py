@@ -29,8 +29,19 @@ _YAW_SEEDS = np.array([0.0, 0.5, 1.0, 1.5]) * math.pi
 
 
 def marker_object_points(marker_length: float) -> FloatArray:
-    """(4, 3) corners of a marker of side ``marker_length`` in its own frame, corner order
-    (OpenCV's ``SOLVEPNP_IPPE_SQUARE`` object points)."""
+    """Corners of a marker in its own frame (OpenCV's ``SOLVEPNP_IPPE_SQUARE`` object points).
+
+    Parameters
+    ----------
+    marker_length : float
+        Side of the marker, m.
+
+    Returns
+    -------
+    ndarray (4, 3)
+        ``(-L/2, L/2, 0), (L/2, L/2, 0), (L/2, -L/2, 0), (-L/2, -L/2, 0)``, m, marker frame
+        (centre origin, x right, y up, z out of the face), OpenCV corner order.
+    """
     return np.column_stack([SQUARE * (0.5 * marker_length), np.zeros(4)])
 
 
@@ -89,9 +100,11 @@ def planar_solutions(xy: ArrayLike, marker_length: float) -> tuple[FloatArray, F
     Returns
     -------
     R : ndarray (2, 3, 3)
-        The two rotations (equal for a marker seen exactly face-on).
+        The two rotations, marker frame into camera frame (equal for a marker seen exactly
+        face-on).
     t : ndarray (2, 3)
-        The translations; both put the centre on its ray at the depth from the Jacobian.
+        The translations, m (the unit of ``marker_length``), camera frame; both put the
+        centre on its ray at the depth from the Jacobian.
 
     Raises
     ------
@@ -146,13 +159,25 @@ def planar_solutions(xy: ArrayLike, marker_length: float) -> tuple[FloatArray, F
 
 
 def yaw_seeds(xy: ArrayLike, marker_length: float) -> FloatArray:
-    """The report's four initial guesses (Appendix G) as (4, 6) parameter vectors
-    ``[x, y, z, phi, theta, psi]``.
+    """The report's four initial guesses (Appendix G).
 
     The marker faces the camera (``phi = pi, theta = 0``: marker x right and y up in the
     image), turned by ``psi`` = 0, 90, 180 and 270 degrees about the optical axis, with its
     centre on the ray through the corners' mean at the depth where a face-on square of side
     ``marker_length`` covers the quadrilateral's area.
+
+    Parameters
+    ----------
+    xy : array_like (4, 2)
+        Normalized image coordinates (undistorted, ``K^-1``) of the corners, OpenCV order.
+    marker_length : float
+        Side of the marker, m.
+
+    Returns
+    -------
+    ndarray (4, 6)
+        Parameter vectors ``[x, y, z, phi, theta, psi]``: marker frame into camera frame,
+        translation in m (the unit of ``marker_length``), angles in rad.
 
     Raises
     ------

@@ -75,7 +75,20 @@ class BodyPose:
 
 
 def relative_pose(T_cam_body: Pose, T_cam_ref: Pose) -> Pose:
-    """``T_ref_body = T_cam_ref^-1 T_cam_body``: the body frame in the reference frame."""
+    """``T_ref_body = T_cam_ref^-1 T_cam_body``: the body frame in the reference frame.
+
+    Parameters
+    ----------
+    T_cam_body : Pose
+        Body frame into camera frame, ``p_cam = R @ p_body + t`` (m).
+    T_cam_ref : Pose
+        Reference frame into the same camera frame (m).
+
+    Returns
+    -------
+    Pose
+        ``T_ref_body``: ``p_ref = R @ p_body + t``, m.
+    """
     return T_cam_ref.inverse().compose(T_cam_body)
 
 
@@ -89,12 +102,33 @@ def track_body(
     """Pose of the body (``body_map``'s markers) in the reference frame (``reference_map``'s),
     both seen in one image by ``camera``.
 
-    Returns None when the body's or the reference's markers are not seen.
+    Parameters
+    ----------
+    detections : list of MarkerDetection
+        Markers found in the image, corners in pixels (ids of neither map are ignored).
+    body_map : MarkerMap
+        The body's markers in the body frame, m.
+    reference_map : MarkerMap
+        The reference markers in the reference frame, m.
+    camera : Camera
+        Intrinsics of the image.
+    **pose_options
+        Passed to both calls of :func:`visloc.pose.estimate_camera_pose` (``pixel_sigma``,
+        ``max_residual``, ``max_iter``, ``n_starts``).
+
+    Returns
+    -------
+    BodyPose or None
+        ``T_ref_body`` (m) with the two camera fits; None when the body's or the reference's
+        markers are not seen.
 
     Raises
     ------
     ValueError
-        When the two maps share marker ids (a detection could not be told apart).
+        When the two maps share marker ids (a detection could not be told apart), or a
+        pose option is out of range.
+    TypeError
+        ``camera`` is not a :class:`Camera`, or an unknown pose option.
     """
     shared = sorted(set(body_map.ids.tolist()) & set(reference_map.ids.tolist()))
     if shared:

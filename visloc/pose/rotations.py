@@ -48,10 +48,18 @@ def euler_to_matrix(angles: ArrayLike) -> FloatArray:
 
 
 def matrix_to_euler(R: ArrayLike) -> FloatArray:
-    """Z-Y-X Euler angles ``[phi, theta, psi]`` (..., 3) of rotation matrices (..., 3, 3).
+    """Z-Y-X Euler angles of rotation matrices.
 
-    ``theta`` is in [-pi/2, pi/2] and ``phi, psi`` in (-pi, pi]: the branch of
-    ``Pose.euler_zyx`` (scipy's ``as_euler("ZYX")``).
+    Parameters
+    ----------
+    R : array_like (..., 3, 3)
+        Rotation matrices, ``R = Rz(psi) @ Ry(theta) @ Rx(phi)`` (not checked).
+
+    Returns
+    -------
+    ndarray (..., 3)
+        ``[phi, theta, psi]``, rad: ``theta`` in [-pi/2, pi/2] and ``phi, psi`` in (-pi, pi],
+        the branch of ``Pose.euler_zyx`` (scipy's ``as_euler("ZYX")``).
     """
     R = np.asarray(R, dtype=np.float64)
     theta = np.arcsin(np.clip(-R[..., 2, 0], -1.0, 1.0))
@@ -61,7 +69,18 @@ def matrix_to_euler(R: ArrayLike) -> FloatArray:
 
 
 def matrix_to_euler_list(R: FloatArray) -> list[list[float]]:
-    """:func:`matrix_to_euler` of a few matrices (S, 3, 3) in scalar code, as lists."""
+    """:func:`matrix_to_euler` of a few matrices in scalar code, as lists.
+
+    Parameters
+    ----------
+    R : array_like (S, 3, 3)
+        Rotation matrices (not checked).
+
+    Returns
+    -------
+    list of S lists of 3 float
+        ``[phi, theta, psi]`` of each matrix, rad, on :func:`matrix_to_euler`'s branch.
+    """
     out = []
     for (r00, _, _), (r10, _, _), (r20, r21, r22) in np.asarray(R, dtype=np.float64).tolist():
         theta = math.asin(min(max(-r20, -1.0), 1.0))
@@ -70,8 +89,24 @@ def matrix_to_euler_list(R: FloatArray) -> list[list[float]]:
 
 
 def rotation_angle(R: ArrayLike) -> float:
-    """Angle (rad, in [0, pi]) of the rotation matrix ``R``; accurate near 0 and pi
-    (``atan2`` of the skew and symmetric parts rather than ``arccos`` of the trace)."""
+    """Angle of a rotation matrix; accurate near 0 and pi (``atan2`` of the skew and
+    symmetric parts rather than ``arccos`` of the trace).
+
+    Parameters
+    ----------
+    R : array_like (3, 3)
+        Rotation matrix.
+
+    Returns
+    -------
+    float
+        Rotation angle, rad, in [0, pi].
+
+    Raises
+    ------
+    ValueError
+        ``R`` is not (3, 3).
+    """
     M = np.asarray(R, dtype=np.float64)
     if M.shape != (3, 3):
         raise ValueError(f"R must have shape (3, 3), got {M.shape}")

@@ -150,19 +150,23 @@ def simulate(
         The vehicle (its mean motor coefficients are what the controller knows).
     sigma : float
         Draw each motor's ``c_i, d_i`` at ``+- sigma`` standard deviations from the mean
-        (signs from ``seed``; :func:`visloc.sim.motor_coefficients`); 0: nominal motors.
+        (signs from ``seed``; :func:`visloc.sim.motor_coefficients`); 0: nominal motors (>= 0).
     seed : int
         Seeds the motor signs, the sensor noise and the turbulence.
     arm : float, optional
         Arm distance of eq. (2.12), m (:func:`visloc.control.resolve_arm`).
-    specs, gains : optional
-        Controller design (default :func:`visloc.control.design_gains` of the defaults).
+    specs : ControlSpecs, optional
+        Loop specifications the controller is designed for when ``gains`` is not given.
+    gains : ControllerGains, optional
+        Controller gains (default :func:`visloc.control.design_gains` of ``params`` and
+        ``specs``).
     seconds : float, optional
-        Override the scenario's duration.
+        Override the scenario's duration, s (> 0).
     dt : float
-        RK4 step of the vehicle, s.
+        RK4 step of the vehicle, s (> 0; rounded so that a whole number of steps fits in a
+        control period).
     control_rate, camera_rate : float
-        Controller / IMU rate and bottom-camera rate, Hz.
+        Controller / IMU rate and bottom-camera rate, Hz (> 0).
     motor_lag : float
         First-order motor time constant (report eq. 2.13), s; 0 as in the report's model.
     progress : callable, optional
@@ -178,6 +182,19 @@ def simulate(
     Returns
     -------
     SimResult
+        Time, true and estimated state, set point, motor commands and saturation flags
+        sampled at ``control_rate``, with the exit :class:`SimStatus`, its reason and the
+        metrics below.
+
+    Raises
+    ------
+    TypeError
+        ``scenario`` neither a str nor a :class:`Scenario`; ``params`` not an
+        :class:`ARDrone2Params`; a number that is not a real number.
+    ValueError
+        Unknown scenario name or estimator; ``seconds``, ``dt``, ``control_rate`` or
+        ``camera_rate`` not finite and > 0; ``sigma``, ``warmup`` or ``motor_lag`` negative;
+        ``sigma`` so large that a motor coefficient is not > 0; ``arm`` not > 0.
 
     Notes
     -----

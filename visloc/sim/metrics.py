@@ -29,6 +29,12 @@ def settling_time(t: FloatArray, error: FloatArray, band: float, t0: float) -> f
         Settling band, in the error's units.
     t0 : float
         When the step or disturbance happened, s.
+
+    Returns
+    -------
+    float or None
+        Settling time after ``t0``, s: 0 when the error never leaves the band after ``t0``;
+        None when it is outside the band at the end or no sample is at or after ``t0``.
     """
     after = t >= t0
     outside = after & (np.abs(error) > band)
@@ -41,23 +47,35 @@ def settling_time(t: FloatArray, error: FloatArray, band: float, t0: float) -> f
 
 
 def linear_step_response(gains: ControllerGains, params: ARDrone2Params, step: FloatArray,
-                         seconds: float, dt: float = 0.005) -> tuple[FloatArray, FloatArray]:
+                         seconds: float, *, dt: float = 0.005) -> tuple[FloatArray, FloatArray]:
     """Set-point step of the *linear* closed loop ``x' = (A - B K) x`` (report eqs. 4.4-4.5).
 
     Parameters
     ----------
     gains : ControllerGains
+        The controller (``K`` with the integral states, :meth:`ControllerGains.K`).
     params : ARDrone2Params
+        Vehicle parameters of the linear model (:func:`visloc.control.augmented_model`).
     step : ndarray (4,)
-        Set-point change ``[dx, dy, dz, dpsi]``: the error state starts at ``-step``.
-    seconds, dt : float
-        Duration and sample time, s.
+        Set-point change ``[dx, dy, dz, dpsi]`` (m in the pilot-frame axes, rad): the error
+        state starts at ``-step``.
+    seconds : float
+        Duration, s.
+    dt : float
+        Sample time, s.
 
     Returns
     -------
     t : ndarray (N,)
+        Sample times ``0, dt, ...``, s; ``N = round(seconds / dt) + 1``.
     position : ndarray (N, 3)
-        Position relative to the old set point, A frame (NED), m.
+        Position relative to the old set point, m, in the pilot-frame axes of the linear
+        model (the A frame's NED axes at heading 0, as in every :data:`SCENARIOS` entry).
+
+    Raises
+    ------
+    TypeError
+        ``params`` is not an :class:`ARDrone2Params`.
     """
     a, b = augmented_model(params)
     a_cl = a - b @ gains.K(integral=True)  # report eq. (4.5): u = -K x
@@ -83,7 +101,31 @@ def _event_time(sc: Scenario) -> float:
 
 def run_metrics(sc: Scenario, t: FloatArray, states: FloatArray, estimates: FloatArray,
                 setpoints: FloatArray, saturated: np.ndarray, wall: float) -> dict:
-    """The metrics of :class:`visloc.sim.SimResult` (see :func:`visloc.sim.simulate`'s notes)."""
+    """The metrics of :class:`visloc.sim.SimResult` (see :func:`visloc.sim.simulate`'s notes).
+
+    Parameters
+    ----------
+    sc : Scenario
+        The scenario flown (its step or push time, start set point and settling band).
+    t : ndarray (N,)
+        Sample times, s.
+    states, estimates : ndarray (N, 12)
+        True and estimated state (:data:`visloc.model.STATE_NAMES`; A frame, NED).
+    setpoints : ndarray (N, 4)
+        ``[x, y, z, psi]`` at each sample, m (A frame, NED) and rad.
+    saturated : ndarray (N,) bool
+        Whether the motor commands were clipped at each sample.
+    wall : float
+        Wall-clock duration of the run, s.
+
+    Returns
+    -------
+    dict
+        ``settling_time_s`` (s, or None), ``overshoot_pct`` (% of the step; None without a
+        step), ``position_rms_m``, ``final_error_m``, ``height_dip_m``, ``estimate_rms_m``
+        (m), ``max_tilt_deg`` (largest roll or pitch, degrees), ``saturated_fraction`` (0-1)
+        and ``realtime_factor`` (simulated over wall-clock seconds; inf when ``wall`` is 0).
+    """
     err = states[:, :3] - setpoints[:, :3]
     dist = np.linalg.norm(err, axis=1)
     t0 = _event_time(sc)
@@ -112,7 +154,31 @@ def run_metrics(sc: Scenario, t: FloatArray, states: FloatArray, estimates: Floa
 
 
 def step_metrics_linear(gains: ControllerGains, p: ARDrone2Params, sc: Scenario, seconds: float) -> dict:
-    """The same step on the linear closed loop: no height dip there (report §4.4)."""
+    """The same step on the linear closed loop: no height dip there (report §4.4).
+
+    Parameters
+    ----------
+    gains : ControllerGains
+        The controller flown.
+    p : ARDrone2Params
+        Vehicle parameters of the linear model.
+    sc : Scenario
+        A scenario with a set-point step.
+    seconds : float
+        Duration of the non-linear run, s; the linear one runs from the step for
+        ``max(seconds - step time, LINEAR_SECONDS)``.
+
+    Returns
+    -------
+    dict
+        ``linear_settling_time_s`` (s, or None), ``linear_overshoot_pct`` (% of the step) and
+        ``linear_height_dip_m`` (m).
+
+    Raises
+    ------
+    ValueError
+        ``sc`` has no set-point step.
+    """
     if sc.step is None:
         raise ValueError(f"scenario {sc.name!r} has no set-point step to compare")
     delta = sc.step[1] - sc.start_setpoint

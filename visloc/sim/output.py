@@ -29,6 +29,25 @@ def write_csv(result: SimResult, path: str | os.PathLike[str]) -> Path:
     """One row per control step: time, true state, estimate (``est_`` prefix), set point, pwm.
 
     Angles in rad, SI units (:data:`visloc.model.STATE_NAMES`).
+
+    Parameters
+    ----------
+    result : SimResult
+        The run to write.
+    path : str or os.PathLike
+        Output file; must end in ``.csv``. Missing parent directories are created.
+
+    Returns
+    -------
+    Path
+        ``path`` as a :class:`pathlib.Path`.
+
+    Raises
+    ------
+    TypeError
+        ``path`` is not a str or os.PathLike.
+    ValueError
+        ``path`` does not end in ``.csv``.
     """
     out = _check_path(path, ".csv")
     header = (["t"] + list(STATE_NAMES) + [f"est_{n}" for n in STATE_NAMES]
@@ -47,7 +66,29 @@ def write_csv(result: SimResult, path: str | os.PathLike[str]) -> Path:
 
 def save_plot(result: SimResult, path: str | os.PathLike[str]) -> Path:
     """PNG of position (true, estimated, set point), attitude and motor commands against time
-    (like report Figures 4.5-4.6). Needs matplotlib (``pip install visloc[plot]``)."""
+    (like report Figures 4.5-4.6). Needs matplotlib (``pip install visloc[plot]``).
+
+    Parameters
+    ----------
+    result : SimResult
+        The run to write.
+    path : str or os.PathLike
+        Output file; must end in ``.png``. Missing parent directories are created.
+
+    Returns
+    -------
+    Path
+        ``path`` as a :class:`pathlib.Path`.
+
+    Raises
+    ------
+    TypeError
+        ``path`` is not a str or os.PathLike.
+    ValueError
+        ``path`` does not end in ``.png``.
+    ImportError
+        matplotlib is not installed.
+    """
     out = _check_path(path, ".png")
     try:
         import matplotlib
@@ -89,6 +130,25 @@ def save_rerun(result: SimResult, path: str | os.PathLike[str]) -> Path:
     ``world/drone`` (Transform3D + Boxes3D), ``world/track`` and ``world/estimate`` (LineStrips3D),
     ``plots/position/<axis>/{true,estimate,setpoint}``, ``plots/attitude/<angle>`` (deg),
     ``plots/pwm/<motor>`` (%); timeline ``time`` (s).
+
+    Parameters
+    ----------
+    result : SimResult
+        The run to write.
+    path : str or os.PathLike
+        Output file; must end in ``.rrd``. Missing parent directories are created.
+
+    Returns
+    -------
+    Path
+        ``path`` as a :class:`pathlib.Path`.
+
+    Raises
+    ------
+    TypeError
+        ``path`` is not a str or os.PathLike.
+    ValueError
+        ``path`` does not end in ``.rrd``.
     """
     import rerun as rr
     from scipy.spatial.transform import Rotation

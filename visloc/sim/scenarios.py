@@ -81,7 +81,23 @@ SCENARIOS: dict[str, Scenario] = {
 
 
 def get_scenario(name: str) -> Scenario:
-    """The scenario called ``name``; ``ValueError`` listing the known ones otherwise."""
+    """The scenario called ``name``.
+
+    Parameters
+    ----------
+    name : str
+        A key of :data:`SCENARIOS`.
+
+    Returns
+    -------
+    Scenario
+        The (frozen) entry of :data:`SCENARIOS`.
+
+    Raises
+    ------
+    ValueError
+        ``name`` is not a known scenario (the message lists the known ones).
+    """
     if name not in SCENARIOS:
         raise ValueError(f"scenario: expected one of {sorted(SCENARIOS)}, got {name!r}")
     return SCENARIOS[name]

@@ -46,7 +46,14 @@ def motor_coefficients(params: ARDrone2Params, n_sigma: float = 0.0, *,
     Returns
     -------
     c, d : ndarray (4,)
-        N/%^2 and N m/%^2.
+        Thrust (N/%^2) and torque (N m/%^2) coefficients of motors 1-4.
+
+    Raises
+    ------
+    TypeError
+        ``params`` is not an :class:`ARDrone2Params` or ``n_sigma`` not a real number.
+    ValueError
+        ``n_sigma`` negative or not finite, or so large that a coefficient is not > 0.
     """
     p = check_params(params)
     n = check_real(n_sigma, "n_sigma", nonneg=True)
@@ -132,7 +139,7 @@ class Vehicle:
         return self._f(self.state, self.inputs, force)[3:6]
 
     def _f(self, s: FloatArray, u: FloatArray, force: FloatArray | None) -> FloatArray:
-        out = rhs(s, u, self.params.mass, self.params.g, self.inertia, self.gyroscopic)
+        out = rhs(s, u, self.params.mass, self.params.g, self.inertia, gyroscopic=self.gyroscopic)
         if force is not None:
             out[3:6] += force / self.params.mass
         return out

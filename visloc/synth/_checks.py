@@ -9,7 +9,26 @@ from numpy.typing import NDArray
 
 
 def check_camera(K: object) -> NDArray[np.float64]:
-    """Return ``K`` as a (3, 3) float64 pinhole matrix or raise naming ``K``."""
+    """Return ``K`` as a pinhole camera matrix or raise naming ``K``.
+
+    Parameters
+    ----------
+    K : array_like (3, 3)
+        Camera matrix ``[[fx, s, cx], [0, fy, cy], [0, 0, 1]]``, px.
+
+    Returns
+    -------
+    ndarray (3, 3) float64
+        A new array.
+
+    Raises
+    ------
+    TypeError
+        If ``K`` is not an array of numbers.
+    ValueError
+        If it is not (3, 3), not finite, or has ``fx <= 0``, ``fy <= 0`` or a last row other
+        than ``[0, 0, 1]``.
+    """
     try:
         k = np.array(K, dtype=np.float64)
     except (TypeError, ValueError) as exc:
@@ -24,7 +43,25 @@ def check_camera(K: object) -> NDArray[np.float64]:
 
 
 def check_size(size: object) -> tuple[int, int]:
-    """Return ``size`` as ``(width, height)`` ints >= 8 or raise naming ``size``."""
+    """Return ``size`` as ``(width, height)`` ints or raise naming ``size``.
+
+    Parameters
+    ----------
+    size : (int, int)
+        ``(width, height)`` of an image, px, each >= 8 (a tuple or list).
+
+    Returns
+    -------
+    (int, int)
+        ``(width, height)``.
+
+    Raises
+    ------
+    TypeError
+        If ``size`` is not a pair of ints.
+    ValueError
+        If a side is below 8 px.
+    """
     if not isinstance(size, (tuple, list)) or len(size) != 2:
         raise TypeError(f"size must be a (width, height) pair, got {size!r}")
     if not all(isinstance(v, numbers.Integral) and not isinstance(v, bool) for v in size):
@@ -44,7 +81,30 @@ def check_number(
     low_open: bool = False,
     high_open: bool = False,
 ) -> float:
-    """Return ``value`` as a finite float in the given range or raise naming ``name``."""
+    """Return ``value`` as a finite float in the given range or raise naming ``name``.
+
+    Parameters
+    ----------
+    value : float
+        The number to check (a real number, not a bool).
+    name : str
+        Name of the argument in error messages.
+    low, high : float or None
+        Bounds of the range (``None``: unbounded).
+    low_open, high_open : bool
+        Exclude the bound itself.
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    TypeError
+        If ``value`` is not a real number.
+    ValueError
+        If it is not finite or out of the range.
+    """
     if not isinstance(value, numbers.Real) or isinstance(value, bool):
         raise TypeError(f"{name} must be a number, got {type(value).__name__}")
     v = float(value)
@@ -58,7 +118,28 @@ def check_number(
 
 
 def check_int(value: object, name: str, *, low: int | None = None, high: int | None = None) -> int:
-    """Return ``value`` as an int in ``[low, high]`` or raise naming ``name``."""
+    """Return ``value`` as an int in ``[low, high]`` or raise naming ``name``.
+
+    Parameters
+    ----------
+    value : int
+        The integer to check (not a bool).
+    name : str
+        Name of the argument in error messages.
+    low, high : int or None
+        Inclusive bounds (``None``: unbounded).
+
+    Returns
+    -------
+    int
+
+    Raises
+    ------
+    TypeError
+        If ``value`` is not an integer.
+    ValueError
+        If it is out of ``[low, high]``.
+    """
     if not isinstance(value, numbers.Integral) or isinstance(value, bool):
         raise TypeError(f"{name} must be an int, got {type(value).__name__}")
     v = int(value)

@@ -65,23 +65,29 @@ def _rect(x0: float, x1: float, y0: float, y1: float) -> FloatArray:
     return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
 
 
-def aprilgrid_tag_corners(rows: int, cols: int, tag_length: float,
+def aprilgrid_tag_corners(rows: int, cols: int, tag_length: float, *,
                           spacing_ratio: float = 0.3) -> FloatArray:
     """Board-frame corners of every tag of an AprilGrid, in id order.
 
     Parameters
     ----------
     rows, cols : int
-        Grid size.
+        Grid size: tags per column and per row (>= 1).
     tag_length : float
-        Side of a tag's black square, m.
+        Side of a tag's black square, m (> 0).
     spacing_ratio : float
-        Gap between tags over ``tag_length``.
+        Gap between tags over ``tag_length`` (> 0).
 
     Returns
     -------
-    ndarray (rows * cols, 4, 3)
-        Per tag, its corners clockwise from its own top-left (OpenCV order), z = 0.
+    ndarray (rows * cols, 4, 3) float64
+        Per tag (row by row from the top-left tag), its corners in the board frame (module
+        docstring), m, clockwise from its own top-left (OpenCV order), z = 0.
+
+    Raises
+    ------
+    TypeError, ValueError
+        On a malformed argument; the message names it.
     """
     rows = check_int(rows, "rows", low=1)
     cols = check_int(cols, "cols", low=1)
@@ -164,9 +170,13 @@ def render_aprilgrid(
         dictionary's last id.
     background : str, ndarray (H, W) uint8 or None
         Background around the board, as for :func:`~visloc.synth.markers.render_markers`.
-    blur_sigma, motion_blur, motion_angle, noise_sigma, gain, gradient, jpeg_quality
-        Degradations, as for :func:`~visloc.synth.markers.render_markers` (defaults: none
-        but 8-bit quantisation); they must keep their defaults with ``camera``.
+    blur_sigma, motion_blur, motion_angle, noise_sigma, gain, gradient : float
+        Degradations (px, px, rad, grey levels, factor, fraction), as for
+        :func:`~visloc.synth.markers.render_markers` (defaults: none but 8-bit quantisation);
+        they must keep their defaults with ``camera``.
+    jpeg_quality : int or None
+        JPEG round-trip quality in [1, 100] (as for
+        :func:`~visloc.synth.markers.render_markers`), or ``None``; ``None`` with ``camera``.
     camera : CameraEffects or None
         A camera model (as for :func:`~visloc.synth.markers.render_markers`): the ground-truth
         corners are then the distorted projections and ``dist`` holds the distortion.
@@ -217,7 +227,7 @@ def render_aprilgrid(
     canvas, bg_name, k_ideal = _ideal_background(k, (w, h), background, camera, gen)
     markers = [  # tag frame: the board's axes at the tag's centre
         _marker_truth(k, (w, h), camera, marker_id, Pose(R, R @ corners.mean(axis=0) + t), L)
-        for marker_id, corners in zip(ids, aprilgrid_tag_corners(rows, cols, L, spacing_ratio),
+        for marker_id, corners in zip(ids, aprilgrid_tag_corners(rows, cols, L, spacing_ratio=spacing_ratio),
                                       strict=True)
     ]
     if faces_camera(pose):

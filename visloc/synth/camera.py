@@ -164,7 +164,8 @@ def distort_points(points: ArrayLike, K: ArrayLike, k1: float, k2: float) -> Flo
     Parameters
     ----------
     points : array_like (N, 2)
-        Pinhole image points ``(x, y)``; non-finite points give non-finite results.
+        Pinhole image points ``(x, y)``, px, pixel centres at integer coordinates; non-finite
+        points give non-finite results.
     K : array_like (3, 3)
         Camera matrix: defines the normalised coordinates ``K^-1 p`` the model acts on.
     k1, k2 : float
@@ -175,7 +176,13 @@ def distort_points(points: ArrayLike, K: ArrayLike, k1: float, k2: float) -> Flo
     Returns
     -------
     ndarray (N, 2) float64
-        Distorted pixel points.
+        Distorted pixel points ``(x, y)``, px, same convention.
+
+    Raises
+    ------
+    TypeError, ValueError
+        On a malformed argument (``points`` not (N, 2) numbers, a bad ``K``, non-finite
+        coefficients); the message names it.
     """
     k = check_camera(K)
     k1 = check_number(k1, "k1")
@@ -277,7 +284,7 @@ def ideal_window(
     k1, k2 : float
         Radial distortion coefficients (OpenCV model).
     size : (int, int)
-        ``(width, height)`` of the frame.
+        ``(width, height)`` of the frame, px.
 
     Returns
     -------
@@ -285,6 +292,12 @@ def ideal_window(
         Pixels (>= 0) to add on each side of a ``size`` pinhole image so that every pixel of
         the distorted frame samples inside it (with a 2 px border for interpolation and blur);
         render it with ``K`` shifted by ``(left, top)``.
+
+    Raises
+    ------
+    TypeError, ValueError
+        On a malformed argument (the message names it), or coefficients that fold the frame
+        (not invertible out to its corners).
     """
     k = check_camera(K)
     k1 = check_number(k1, "k1")
@@ -321,8 +334,8 @@ def apply_camera(
     linear: ArrayLike,
     K: ArrayLike,
     effects: CameraEffects,
-    rng: np.random.Generator | int | None = None,
     *,
+    rng: np.random.Generator | int | None = None,
     size: tuple[int, int] | None = None,
     ideal_K: ArrayLike | None = None,
 ) -> tuple[NDArray[np.uint8], dict]:
@@ -341,7 +354,7 @@ def apply_camera(
     rng : numpy.random.Generator, int or None
         Randomness of the noise (``np.random.default_rng(rng)``).
     size : (int, int) or None
-        ``(width, height)`` of the frame; default the size of ``linear``.
+        ``(width, height)`` of the frame, px; default the size of ``linear``.
     ideal_K : array_like (3, 3) or None
         Pinhole matrix of ``linear`` (default ``K``). With ``size`` it lets ``linear`` extend
         past the frame (see :func:`ideal_window`), so that barrel distortion shows scene

@@ -34,8 +34,26 @@ DATASET_LENS = (-0.05, 0.0)
 
 def write_camera_yml(path: str | Path, K: FloatArray, size: tuple[int, int],
                      dist: FloatArray | None = None) -> Path:
-    """Write an OpenCV FileStorage YAML camera file (``dist``: OpenCV distortion
-    coefficients, zero when ``None``) and return its path."""
+    """Write an OpenCV FileStorage YAML camera file.
+
+    Parameters
+    ----------
+    path : str or Path
+        Output file (overwritten; its folder must exist).
+    K : ndarray (3, 3)
+        Camera matrix, px (OpenCV's pixel convention: pixel centres at integer coordinates),
+        written as ``camera_matrix``.
+    size : (int, int)
+        ``(width, height)`` of the images, px (``image_width``, ``image_height``).
+    dist : ndarray (n,) or None
+        OpenCV distortion coefficients (``k1, k2, p1, p2[, k3 ...]``), written as a 1 x n
+        ``distortion_coefficients``; ``None``: five zeros.
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     path = Path(path)
     fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
     try:
@@ -97,8 +115,12 @@ def render_dataset(
         Number of frames (>= 1).
     seed : int
         Seed of the dataset.
-    size, dictionary, difficulty
-        As in :func:`random_scene`.
+    size : (int, int)
+        ``(width, height)``, px (as in :func:`~visloc.synth.scenes.random_scene`).
+    dictionary : str or Dictionary
+        Marker dictionary (as in :func:`~visloc.synth.scenes.random_scene`).
+    difficulty : {'easy', 'hard', 'small', 'empty', 'dark'}
+        As in :func:`~visloc.synth.scenes.random_scene`.
     camera : bool
         Camera-like frames (``True``) or linear renders.
     progress : callable or None
@@ -113,6 +135,13 @@ def render_dataset(
         ``camera`` ``{"K", "dist"}``, ``marker_length``, ``difficulty``, ``seed`` and
         ``frames``: per frame ``file``, ``params`` and ``markers`` (``id``, ``corners`` (4 x
         [x, y], OpenCV order), ``rvec``, ``tvec``, ``length``, ``visible``).
+
+    Raises
+    ------
+    TypeError, ValueError
+        On a malformed argument; the message names it.
+    OSError
+        If a frame cannot be written.
     """
     n = check_int(n, "n", low=1)
     seed = check_int(seed, "seed", low=0)
@@ -188,7 +217,7 @@ def render_video(
     seed : int
         Seed of the marker layout, background and noise.
     size : (int, int)
-        ``(width, height)``.
+        ``(width, height)``, px.
     dictionary : str or Dictionary
         Marker dictionary.
     n_markers : int
@@ -199,8 +228,8 @@ def render_video(
         Where to write the ground truth; default ``ground_truth.json`` beside the video.
     progress : callable or None
         Called as ``progress(i)`` after frame ``i`` is written. An exception it raises (or a
-        Ctrl-C) stops the run; ``ground_truth.json`` and ``camera.yml`` then cover the frames
-        written so far.
+        Ctrl-C) stops the run; the video then holds the frames written so far and no ground
+        truth is written.
 
     Returns
     -------
@@ -208,6 +237,13 @@ def render_video(
         ``path``. The ground truth has the form of :func:`render_dataset`'s; each frame
         record has ``file`` ``"<video name>#<i>"``, ``index``, ``time`` (s), and markers
         outside the view are listed with ``visible: false``.
+
+    Raises
+    ------
+    TypeError, ValueError
+        On a malformed argument; the message names it.
+    OSError
+        If the video cannot be opened for writing.
     """
     n = check_int(n, "n", low=2)
     seed = check_int(seed, "seed", low=0)

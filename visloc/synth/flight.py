@@ -199,6 +199,12 @@ def flight_trajectory(
     Returns
     -------
     FlightTrack
+        Poses and exact motion at the frame times (module docstring for the frames).
+
+    Raises
+    ------
+    TypeError, ValueError
+        On a malformed argument; the message names it.
     """
     if not isinstance(rng_or_seed, (np.random.Generator, numbers.Integral)) \
             or isinstance(rng_or_seed, bool):
@@ -263,6 +269,12 @@ def straight_track(
     Returns
     -------
     FlightTrack
+        Poses and exact motion at the frame times (module docstring for the frames).
+
+    Raises
+    ------
+    TypeError, ValueError
+        On a malformed argument; the message names it.
     """
     t = _frame_times(seconds, fps)
     vx, vy = _check_pair(velocity, "velocity")
@@ -403,24 +415,37 @@ def render_ground_view(
 
     Parameters
     ----------
-    K, size : array_like (3, 3), (int, int)
-        Pinhole camera matrix and image ``(width, height)``.
+    K : array_like (3, 3)
+        Pinhole camera matrix, px (pixel centres at integer coordinates).
+    size : (int, int)
+        Image ``(width, height)``, px.
     pose_world_from_cam : (ndarray (3, 3), ndarray (3,))
-        ``(R_world_cam, C)``: camera axes in world coordinates (columns), centre with C_z > 0.
+        ``(R_world_cam, C)``: camera axes in world coordinates (columns), and the camera
+        centre in the world frame (module docstring), m, with ``C_z > 0``.
     texture : str or ndarray (H, W)
-        A name from :data:`GROUND_TEXTURES` or a grey image (uint8 or float).
-    metres_per_texel, supersample : float, int
-        Ground size of a texel (m, > 0); samples per pixel along each axis (1 to 8).
-    rng, noise_sigma, blur_sigma : numpy.random.Generator or None, float, float
-        Noise source (None: a fresh unseeded one), Gaussian sensor noise (grey levels) and
-        optical blur (px), >= 0, applied by :func:`~visloc.synth.textures.degrade`.
+        A name from :data:`GROUND_TEXTURES` or a grey image (uint8 or float, finite, at
+        least 2 x 2), mirror-tiled over the ground.
+    metres_per_texel : float
+        Ground size of a texel, m (> 0).
+    supersample : int
+        Samples per pixel along each axis (1 to 8).
+    rng : numpy.random.Generator or None
+        Noise source (None: a fresh unseeded one).
+    noise_sigma : float
+        Gaussian sensor noise, grey levels (>= 0).
+    blur_sigma : float
+        Optical blur, px (>= 0); noise and blur are applied by
+        :func:`~visloc.synth.textures.degrade`.
 
     Returns
     -------
-    ndarray (H, W) uint8
+    ndarray (height, width) uint8
+        The rendered view.
 
     Raises
     ------
+    TypeError
+        If an argument has the wrong type; the message names it.
     ValueError
         If part of the view misses the ground (horizon), or an argument is out of range.
     """
@@ -438,8 +463,24 @@ def render_ground_view(
 
 
 def default_bottom_camera(size: tuple[int, int] = (320, 240)) -> FloatArray:
-    """AR.Drone 2.0 bottom camera matrix (calib/ardrone2_bottom_320x240.yml) scaled to
-    ``size``: ``f = 320.0669 w / 320``, principal point ``((w - 1) / 2, (h - 1) / 2)``."""
+    """AR.Drone 2.0 bottom camera matrix (calib/ardrone2_bottom_320x240.yml) scaled to ``size``.
+
+    Parameters
+    ----------
+    size : (int, int)
+        ``(width, height)`` of the images, px.
+
+    Returns
+    -------
+    ndarray (3, 3) float64
+        ``[[f, 0, cx], [0, f, cy], [0, 0, 1]]`` with ``f = 320.0669 w / 320`` px and the
+        principal point ``((w - 1) / 2, (h - 1) / 2)`` (pixel centres at integer coordinates).
+
+    Raises
+    ------
+    TypeError, ValueError
+        If ``size`` is not a pair of ints >= 8.
+    """
     w, h = check_size(size)
     f = ARDRONE2_BOTTOM_F * w / 320.0
     return np.array([[f, 0.0, 0.5 * (w - 1)], [0.0, f, 0.5 * (h - 1)], [0.0, 0.0, 1.0]])
@@ -478,13 +519,20 @@ def render_flight(
     seconds, fps : float
         Duration and frame rate (> 0); with ``track``, ``fps`` must match its frame spacing.
     size : (int, int)
-        ``(width, height)``.
+        ``(width, height)``, px.
     K : array_like (3, 3) or None
-        Camera matrix; default :func:`default_bottom_camera` for ``size``.
+        Camera matrix, px; default :func:`default_bottom_camera` for ``size``.
     seed : int
         Seeds the trajectory (``default_rng([seed, 1])``) and the noise (``[seed, 2]``).
-    texture, noise_sigma, blur_sigma, metres_per_texel
-        As in :func:`render_ground_view` (which renders each frame, supersample 2).
+    texture : str or ndarray (H, W)
+        Ground texture, as in :func:`render_ground_view` (which renders each frame,
+        supersample 2).
+    noise_sigma : float
+        Gaussian sensor noise, grey levels (>= 0).
+    blur_sigma : float
+        Optical blur, px (>= 0).
+    metres_per_texel : float
+        Ground size of a texel, m (> 0).
     track : FlightTrack or None
         Fly this track instead of a random :func:`flight_trajectory`.
     progress : callable or None
@@ -495,6 +543,14 @@ def render_flight(
     Returns
     -------
     Flight
+        ``frames`` (N, H, W) uint8, their ``track``, ``K`` and the settings.
+
+    Raises
+    ------
+    TypeError, ValueError
+        On a malformed argument (the message names it), ``track`` combined with trajectory
+        options or with a frame spacing other than ``1 / fps``, or a view that misses the
+        ground.
     """
     w, h = check_size(size)
     K = default_bottom_camera((w, h)) if K is None else check_camera(K)
@@ -522,13 +578,35 @@ def render_flight(
 
 
 def write_flight(outdir: str | Path, flight: Flight, *, video: bool = False) -> Path:
-    """Write a flight to ``outdir`` (created if missing; files are overwritten) and return it.
+    """Write a flight to a folder.
 
     Files: ``frame_00000.png``, ... or, with ``video``, ``flight.mp4`` (codec mp4v, lossy);
     ``ground_truth.csv``, a row per frame with the columns ``frame,t,x,y,height,yaw,roll,pitch,
     vx,vy,yaw_rate,roll_rate,pitch_rate,pair_vx,pair_vy,pair_yaw_rate`` (``vx, vy`` =
     ``v_cam``; ``pair_*`` of frame 0 are nan); ``heights.csv`` (``frame,t,height``); and
     ``camera.yml`` (OpenCV FileStorage, zero distortion).
+
+    Parameters
+    ----------
+    outdir : str or Path
+        Output folder, created if missing; files already there are overwritten.
+    flight : Flight
+        The flight (:func:`render_flight`).
+    video : bool
+        Write the frames as ``flight.mp4`` at ``flight.params["fps"]`` (default 30) instead
+        of PNG files.
+
+    Returns
+    -------
+    Path
+        ``outdir``.
+
+    Raises
+    ------
+    TypeError
+        If ``flight`` is not a Flight.
+    OSError
+        If the video or a frame cannot be written.
     """
     if not isinstance(flight, Flight):
         raise TypeError(f"flight must be a Flight, got {type(flight).__name__}")

@@ -43,8 +43,34 @@ class MapView:
 
 def render_map_view(marker_map: MarkerMap, K: NDArray, size: tuple[int, int], T_cam_map: Pose,
                     dictionary: str, **render_options: object) -> MapView:
-    """Render every marker of ``marker_map`` seen from ``T_cam_map`` (options as
-    :func:`visloc.synth.render_markers`)."""
+    """Render every marker of ``marker_map`` seen from ``T_cam_map``.
+
+    Parameters
+    ----------
+    marker_map : MarkerMap
+        The markers: corners in the map frame, m.
+    K : ndarray (3, 3)
+        Camera matrix, px (pixel centres at integer coordinates).
+    size : (int, int)
+        ``(width, height)`` of the image, px.
+    T_cam_map : Pose
+        Map-to-camera transform, ``p_cam = R @ p_map + t`` (t in m).
+    dictionary : str or Dictionary
+        The markers' dictionary.
+    **render_options
+        Keyword arguments of :func:`visloc.synth.render_markers` (``background``,
+        ``blur_sigma``, ``rng``, ``camera``, ...).
+
+    Returns
+    -------
+    MapView
+        The render (one ground-truth entry per marker, in id order) and ``T_cam_map``.
+
+    Raises
+    ------
+    TypeError, ValueError
+        On a malformed argument (:func:`visloc.synth.render_markers`); the message names it.
+    """
     placements = []
     for i in marker_map.ids:
         corners = marker_map.corners_of(int(i))
@@ -57,8 +83,41 @@ def render_map_view(marker_map: MarkerMap, K: NDArray, size: tuple[int, int], T_
 def random_map_view(rng: np.random.Generator, marker_map: MarkerMap, K: NDArray, size: tuple[int, int],
                     dictionary: str, *, height: tuple[float, float] = (0.6, 1.6), max_tilt_deg: float = 20.0,
                     offset: float = 0.2, **render_options: object) -> MapView:
-    """A camera above the map's centre (within ``offset`` m), at a height in ``height`` (m),
-    any yaw, tilted up to ``max_tilt_deg`` from looking straight down."""
+    """A random view of the map from above: a camera over the map's centre, any yaw, tilted
+    up to ``max_tilt_deg`` from looking straight down.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        Source of the camera pose and of the render's randomness.
+    marker_map : MarkerMap
+        The markers, in a map frame with z up (e.g. a grid on the floor), corners in m.
+    K : ndarray (3, 3)
+        Camera matrix, px (pixel centres at integer coordinates).
+    size : (int, int)
+        ``(width, height)`` of the image, px.
+    dictionary : str or Dictionary
+        The markers' dictionary.
+    height : (float, float)
+        Range of the camera's height above the mean of the marker corners, m.
+    max_tilt_deg : float
+        Largest tilt away from looking straight down (map -z), degrees.
+    offset : float
+        Largest horizontal distance of the camera from the mean of the corners along map x
+        and along map y, m.
+    **render_options
+        Keyword arguments of :func:`visloc.synth.render_markers` other than ``rng``.
+
+    Returns
+    -------
+    MapView
+        The render and the camera pose ``T_cam_map``.
+
+    Raises
+    ------
+    TypeError, ValueError
+        On a malformed argument (:func:`visloc.synth.render_markers`); the message names it.
+    """
     pts = np.concatenate([marker_map.corners_of(int(i)) for i in marker_map.ids])
     centre = pts.mean(axis=0)
     pos = centre + np.array([rng.uniform(-offset, offset), rng.uniform(-offset, offset), rng.uniform(*height)])
@@ -106,11 +165,50 @@ def render_map_flight(seconds: float, fps: float, marker_map: MarkerMap, *, size
                       height: tuple[float, float] = (0.8, 1.3), roll_pitch: float = 0.1,
                       imu_rate: float | None = 200.0, accel_noise: float = 0.05, gyro_noise: float = 0.005,
                       **render_options: object) -> MapFlight:
-    """Fly the bottom camera (AR.Drone 2.0 intrinsics scaled to ``size``) over ``marker_map``
-    (lying in the ground plane, z up): a smooth random trajectory from
-    :func:`visloc.synth.flight.flight_trajectory`, centred over the map, rendered frame by
-    frame with exact marker ground truth, and (``imu_rate``) IMU samples of the same flight
-    with white noise."""
+    """Fly the bottom camera (AR.Drone 2.0 intrinsics scaled to ``size``) over ``marker_map``:
+    a smooth random trajectory from :func:`visloc.synth.flight.flight_trajectory`, centred
+    over the map, rendered frame by frame with exact marker ground truth, and (``imu_rate``)
+    IMU samples of the same flight with white noise.
+
+    Parameters
+    ----------
+    seconds, fps : float
+        Duration, s, and frame rate, Hz (> 0): ``max(1, round(seconds * fps))`` frames.
+    marker_map : MarkerMap
+        The markers, lying in the ground plane ``z = 0`` of a z-up map frame, corners in m.
+    size : (int, int)
+        ``(width, height)`` of the frames, px.
+    seed : int
+        Seeds the trajectory, the render noise (``default_rng([seed, 3])``) and the IMU noise
+        (``[seed, 4]``).
+    dictionary : str
+        The markers' dictionary.
+    max_speed : float
+        Bound of the camera's speed, m/s.
+    height : (float, float)
+        Range of the camera's height above the ground, m.
+    roll_pitch : float
+        Amplitude of roll and pitch, rad.
+    imu_rate : float or None
+        IMU sample rate, Hz; ``None`` (or 0): no IMU.
+    accel_noise : float
+        Standard deviation of the accelerometer's white noise per sample and axis, m/s^2.
+    gyro_noise : float
+        Standard deviation of the gyro's white noise per sample and axis, rad/s.
+    **render_options
+        Keyword arguments of :func:`visloc.synth.render_markers` other than ``rng``.
+
+    Returns
+    -------
+    MapFlight
+        Frames (N, height, width) uint8, the track (camera centre in the map frame), ``K``,
+        the map and the IMU samples (M, 7) or ``None``.
+
+    Raises
+    ------
+    TypeError, ValueError
+        On a malformed argument; the message names it.
+    """
     from dataclasses import replace
 
     from visloc.synth.flight import default_bottom_camera, flight_trajectory

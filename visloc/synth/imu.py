@@ -149,11 +149,17 @@ def imu_stream(
         s; the motion then fades in over ``RAMP_SECONDS`` (a smoothstep on the angles and the
         accelerations; the rates follow by the product rule).
     gravity : float
-        m/s^2.
+        Magnitude of gravity, m/s^2 (>= 0).
 
     Returns
     -------
     ImuStream
+        ``round(seconds * rate_hz)`` samples with their exact truth.
+
+    Raises
+    ------
+    TypeError, ValueError
+        On a malformed argument (the message names it), or fewer than one sample.
     """
     seconds = check_number(seconds, "seconds", low=0.0, low_open=True)
     rate_hz = check_number(rate_hz, "rate_hz", low=0.0, low_open=True)

@@ -123,13 +123,42 @@ class MarkerRender:
 
 
 def marker_object_points(length: float) -> FloatArray:
-    """Marker-frame corners ``(4, 3)`` of a marker of side ``length``, in corner order."""
+    """Marker-frame corners of a marker, in corner order.
+
+    Parameters
+    ----------
+    length : float
+        Side of the marker's black square, m.
+
+    Returns
+    -------
+    ndarray (4, 3) float64
+        ``(-L/2, L/2, 0), (L/2, L/2, 0), (L/2, -L/2, 0), (-L/2, -L/2, 0)``: top-left,
+        top-right, bottom-right, bottom-left in the marker frame (:mod:`visloc.types`), m.
+    """
     h = 0.5 * float(length)
     return np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
 
 
 def project_points(K: FloatArray, pose: Pose, points: FloatArray) -> FloatArray:
-    """Pinhole projection ``(N, 2)`` of marker-frame points ``(N, 3)`` (no distortion)."""
+    """Pinhole projection of marker-frame points (no distortion).
+
+    Parameters
+    ----------
+    K : ndarray (3, 3)
+        Camera matrix, px.
+    pose : Pose
+        Marker-to-camera transform, ``p_cam = R @ p_marker + t``.
+    points : ndarray (N, 3)
+        Points in the marker frame, m.
+
+    Returns
+    -------
+    ndarray (N, 2) float64
+        Image points ``(x, y)``, px, pixel centres at integer coordinates; points in the
+        camera's ``z = 0`` plane give inf or NaN, points behind the camera are projected
+        through it all the same.
+    """
     pc = pose.apply(points)
     with np.errstate(divide="ignore", invalid="ignore"):
         uv = pc @ np.asarray(K, float).T
@@ -137,7 +166,17 @@ def project_points(K: FloatArray, pose: Pose, points: FloatArray) -> FloatArray:
 
 
 def faces_camera(pose: Pose) -> bool:
-    """True when the camera is on the printed (+z) side of the marker plane."""
+    """Whether the camera is on the printed (+z) side of the marker plane.
+
+    Parameters
+    ----------
+    pose : Pose
+        Marker-to-camera transform, ``p_cam = R @ p_marker + t``.
+
+    Returns
+    -------
+    bool
+    """
     return bool(np.dot(pose.t, pose.R[:, 2]) < 0.0)
 
 
@@ -434,7 +473,7 @@ def _finish(canvas: FloatArray, k: FloatArray, k_ideal: FloatArray, size: tuple[
             jpeg_quality=jpeg_quality,
         )
     else:
-        image, camera_params = apply_camera(canvas, k, camera, gen, size=size, ideal_K=k_ideal)
+        image, camera_params = apply_camera(canvas, k, camera, rng=gen, size=size, ideal_K=k_ideal)
         grad_angle = None
     params = {
         **params,

@@ -48,6 +48,11 @@ def polygon_edges(
         Edge end points.
     weight : ndarray (E,)
         Weight of each edge, signed so that :func:`edge_coverage` adds ``+weight`` inside.
+
+    Raises
+    ------
+    ValueError
+        If ``polygons`` and ``weights`` differ in length.
     """
     starts, ends, ws = [], [], []
     for poly, w in zip(polygons, weights, strict=True):
@@ -80,8 +85,9 @@ def edge_coverage(
     Parameters
     ----------
     start, end : ndarray (E, 2)
-        Edge end points ``(x, y)`` from :func:`polygon_edges`; together they must form closed
-        polygons. Coordinates may lie far outside the image.
+        Edge end points ``(x, y)``, px, pixel centres at integer coordinates, from
+        :func:`polygon_edges`; together they must form closed polygons. Coordinates may lie
+        far outside the image.
     weight : ndarray (E,)
         Edge weights from :func:`polygon_edges`.
     shape : (int, int)
@@ -168,5 +174,10 @@ def polygon_coverage(
     -------
     ndarray (height, width) float64
         For every pixel, ``sum_k weights[k] * area(pixel ∩ polygons[k])``.
+
+    Raises
+    ------
+    ValueError
+        If ``polygons`` and ``weights`` differ in length.
     """
     return edge_coverage(*polygon_edges(polygons, weights), shape)

@@ -34,21 +34,27 @@ _CORNER_RADIUS = 0.8
 DARK_EXPOSURE = (0.015, 0.035)
 
 
-def default_camera(size: tuple[int, int], hfov_deg: float = 65.0) -> FloatArray:
+def default_camera(size: tuple[int, int], *, hfov_deg: float = 65.0) -> FloatArray:
     """Pinhole matrix with square pixels, the principal point at the image centre and the
     given horizontal field of view.
 
     Parameters
     ----------
     size : (int, int)
-        ``(width, height)``.
+        ``(width, height)``, px.
     hfov_deg : float
         Horizontal field of view in degrees, in (0, 180).
 
     Returns
     -------
-    ndarray (3, 3)
-        ``[[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1]]``, ``f = (w / 2) / tan(hfov / 2)``.
+    ndarray (3, 3) float64
+        ``[[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1]]``, ``f = (w / 2) / tan(hfov / 2)``
+        px (pixel centres at integer coordinates).
+
+    Raises
+    ------
+    TypeError, ValueError
+        On a malformed argument; the message names it.
     """
     w, h = check_size(size)
     hfov = np.radians(check_number(hfov_deg, "hfov_deg", low=0.0, high=180.0, low_open=True,
@@ -229,7 +235,7 @@ def random_scene(
     rng : numpy.random.Generator or int
         Source of randomness (an int is a seed); the scene is a deterministic function of it.
     size : (int, int)
-        ``(width, height)``.
+        ``(width, height)``, px.
     dictionary : str or Dictionary
         Marker dictionary.
     difficulty : {'easy', 'hard', 'small', 'empty', 'dark'}
@@ -269,8 +275,12 @@ def random_scene(
 
     Raises
     ------
+    TypeError
+        A malformed ``rng``, ``size``, ``dictionary``, ``camera`` or ``n_markers``.
     ValueError
-        Unknown ``difficulty``, bad ``n_markers``, or markers that cannot be placed.
+        Unknown ``difficulty`` or ``dictionary``, bad ``n_markers`` or ``size``.
+    RuntimeError
+        Markers that cannot be placed.
     """
     if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool):
         rng = np.random.default_rng(int(rng))

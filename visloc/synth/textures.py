@@ -83,12 +83,20 @@ def make_background(
         Grey levels.
     name : str
         The texture name, or ``'array'`` for a given image.
+
+    Raises
+    ------
+    TypeError
+        If ``background`` is not None, a str or a numpy array, or its pixel type is not
+        supported (:func:`visloc.images.as_gray`).
+    ValueError
+        An unknown name, an image of another size or shape, or a missing texture file.
     """
     w, h = size
     if background is None:
         background = "flat"
     if isinstance(background, np.ndarray):
-        img = as_gray(background, "background")
+        img = as_gray(background, name="background")
         if img.shape != (h, w):
             raise ValueError(f"background must have shape {(h, w)} (H, W), got {img.shape}")
         return img.astype(np.float64), "array"
@@ -157,6 +165,28 @@ def degrade(
     ``1 - gradient * s`` (``s`` from 0 to 1 across the image along a random direction) and
     ``gain``, additive Gaussian noise, rounding and clipping to uint8, JPEG round trip.
     Arguments are assumed valid (the public renderers check them).
+
+    Parameters
+    ----------
+    image : ndarray (H, W) float
+        Grey levels on a 0-255 scale (clipped when quantised).
+    rng : numpy.random.Generator
+        Source of the gradient direction and of the noise.
+    blur_sigma : float
+        Standard deviation of the Gaussian optical blur, px (0: none); the image's border is
+        mirrored.
+    motion_blur : float
+        Length of the linear motion blur, px (0: none).
+    motion_angle : float
+        Direction of the motion blur, radians from image x towards y (down).
+    gradient : float
+        Strength of the illumination gradient, in [0, 1) (0: none).
+    gain : float
+        Exposure factor (> 0).
+    noise_sigma : float
+        Standard deviation of the additive Gaussian noise, grey levels (0: none).
+    jpeg_quality : int or None
+        JPEG round-trip quality in [1, 100], or ``None`` for none.
 
     Returns
     -------

@@ -315,7 +315,7 @@ def markdown(result) -> str:
                                                  fmt(s["trans_err_median_pct"], 2), fmt(s["flip_rate"], 3)]) + " |")
     if result.get("boards"):
         lines.append("\n**AprilGrid-style boards**, 640x480 DICT_APRILTAG_36h11 (tags touching the grid's corner "
-                     "squares; found = right id and every corner within 3 px; `visloc_boards` = `erode=2`)\n")
+                     "squares; found = right id and every corner within 3 px; `visloc`: defaults, stage 3c on; `visloc_boards` = `erode=2`, stage 3b on every frame)\n")
         lines.append("| method | ms/frame | set | found | recall | corner RMS px |")
         lines.append("|---|---|---|---|---|---|")
         for m, st in result["boards"].items():

@@ -109,6 +109,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_detect(sub)
     _add_render(sub)
     _add_flow(sub)
+    _add_calibrate(sub)
     _add_localize(sub)
     _add_track(sub)
     _add_model(sub)
@@ -171,6 +172,34 @@ def _add_render(sub: argparse._SubParsersAction) -> None:
     rf.add_argument("--size", type=_size, default=(320, 240), help="WIDTHxHEIGHT (default 320x240)")
     rf.add_argument("--texture", default="grass", choices=["grass", "gravel", "brick", "noise"])
     rf.add_argument("--video", action="store_true", help="write flight.mp4 instead of PNG frames")
+    rb = rs.add_parser("board", help="a ChArUco board file printed to scale (PNG)")
+    rb.add_argument("board", help="board file (YAML: board_type charuco, squares_x, squares_y, ...)")
+    rb.add_argument("output", help="output image (.png)")
+    rb.add_argument("--dpi", type=_at_most(2400, "a printer's resolution"), default=300.0,
+                    help="dots per inch (default 300, at most 2400)")
+    rc = rs.add_parser("calibration", help="camera-like views of a ChArUco board + the true camera")
+    rc.add_argument("outdir", help="output folder")
+    rc.add_argument("--board", required=True, metavar="BOARD.yml", help="board file")
+    rc.add_argument("--n", type=_count, default=30, help="number of views (default 30, at most 500)")
+    rc.add_argument("--size", type=_size, default=(1280, 720), help="WIDTHxHEIGHT (default 1280x720)")
+    rc.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+
+
+def _add_calibrate(sub: argparse._SubParsersAction) -> None:
+    """The ``visloc calibrate`` sub-command's arguments."""
+    cb = sub.add_parser("calibrate", help="a camera file from views of a ChArUco board (cv2.calibrateCamera)")
+    cb.add_argument("source", help="image folder, glob pattern or video file of the board")
+    cb.add_argument("--board", required=True, metavar="BOARD.yml", help="board file (see visloc render board)")
+    cb.add_argument("--out", required=True, metavar="CAMERA.yml", help="camera file to write (OpenCV YAML)")
+    cb.add_argument("--model", default="k1k2p1p2k3", choices=("pinhole-k1k2", "k1k2p1p2k3", "rational"),
+                    help="distortion model (default k1k2p1p2k3, OpenCV's five coefficients)")
+    cb.add_argument("--every", type=_count, default=1, metavar="N", help="use every Nth frame (default 1)")
+    cb.add_argument("--min-corners", type=_count, default=6, metavar="N",
+                    help="views with fewer board corners are left out (default 6, at least 6)")
+    cb.add_argument("--response", type=_response, default="srgb", metavar="srgb|linear|GAMMA", help=_RESPONSE_HELP)
+    cb.add_argument("--max-frames", type=_count, metavar="N", help="stop after N frames")
+    cb.add_argument("--json", action="store_true", help="print the result as JSON")
+    cb.add_argument("--quiet", action="store_true", help="no progress bar or summary")
 
 
 def _add_flow(sub: argparse._SubParsersAction) -> None:
@@ -288,7 +317,7 @@ def _detector_arguments(p: argparse.ArgumentParser) -> None:
 
 
 #: options naming files or folders a command reads, and those it writes
-_INPUTS = ("source", "camera", "map", "height_csv", "imu", "truth", "dict", "body", "reference")
+_INPUTS = ("source", "camera", "map", "height_csv", "imu", "truth", "dict", "body", "reference", "board")
 _OUTPUTS = ("out", "annotate", "rerun", "explain", "plot", "outdir", "output")
 
 
@@ -377,7 +406,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     run = {"detect": commands.detect, "render": commands.render, "demo": commands.demo,
            "flow": commands.flow, "track": commands.track, "localize": commands.localize,
-           "model": commands.model, "robust": commands.robust, "sim": commands.sim}[args.command]
+           "model": commands.model, "robust": commands.robust, "sim": commands.sim,
+           "calibrate": commands.calibrate_camera}[args.command]
     try:
         check_outputs(args)
         return run(args)

@@ -5,6 +5,7 @@ status. Results are written and flushed frame by frame; a frame that cannot be r
 on one line, recorded as an error, and the run goes on.
 """
 
+from visloc.commands.calibrate import calibrate_camera
 from visloc.commands.demo import demo
 from visloc.commands.flow import flow
 from visloc.commands.localize import localize, track
@@ -13,4 +14,4 @@ from visloc.commands.model import model, model_summary
 from visloc.commands.robust import robust
 from visloc.commands.sim import sim
 
-__all__ = ["demo", "detect", "flow", "localize", "model", "model_summary", "render", "robust", "sim", "track"]
+__all__ = ["calibrate_camera", "demo", "detect", "flow", "localize", "model", "model_summary", "render", "robust", "sim", "track"]

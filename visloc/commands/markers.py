@@ -19,6 +19,7 @@ from visloc.commands._common import (
     marker_records,
     warn,
 )
+from visloc.commands.calibrate import render_board, render_calibration
 from visloc.commands.flow import render_flow
 from visloc.commands.localize import render_localize
 from visloc.errors import UsageError
@@ -108,6 +109,10 @@ def render(args: argparse.Namespace) -> int:
         return render_map(args)
     if args.what == "localize":
         return render_localize(args)
+    if args.what == "board":
+        return render_board(args)
+    if args.what == "calibration":
+        return render_calibration(args)
     from visloc.synth import render_dataset, render_video
 
     out = Path(args.outdir)

@@ -1,0 +1,156 @@
+"""Calibration benchmark: visloc's ChArUco corners and calibration against OpenCV's route.
+
+Camera-like 1280x720 views of a ChArUco board (9 x 6 squares of 30 mm, 22 mm DICT_5X5_100
+markers; ``visloc.synth.calibration.calibration_views``: optics blur, shot and read noise,
+vignetting, radial distortion k1 = -0.12, k2 = 0.03, the sRGB curve, JPEG 92; tilts up to 45
+degrees), three sets of 30 views (seeds 0-2). On the same images, interleaved:
+
+- ``visloc``: ``visloc.boards.detect_charuco`` (visloc's markers, each black square's edges
+  fitted by the marker detector's stage 8), then ``visloc.boards.calibrate``;
+- ``opencv``: ``cv2.aruco.CharucoDetector`` with its defaults (its chessboard corners refined by
+  ``cornerSubPix``), then ``cv2.calibrateCamera``;
+- ``opencv_subpix``: the same with the markers' ``CORNER_REFINE_SUBPIX``.
+
+Printed per method: chessboard corners found (of those visible) and their RMS and median error
+against the truth; calibrating from views 0-19 of each set (OpenCV's five-coefficient model for
+all): the errors of fx, fy, cx, cy (px) and the RMS reprojection error on views 20-29 (their
+true corners, each view's pose solved with the calibrated camera by ``solvePnP``); and the time
+to calibrate from all 30 views (detection plus solver). Usage: ``python bench/calibrate.py``;
+writes ``bench/results/calibrate.json`` and ``calibrate.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+from _results import fmt, write_results
+
+from visloc.boards import CharucoBoard, CharucoCorners, calibrate, detect_charuco
+from visloc.synth.calibration import calibration_views
+
+ROOT = Path(__file__).resolve().parents[1]
+BOARD = CharucoBoard(9, 6, 0.03, 0.022, "DICT_5X5_100")
+SIZE = (1280, 720)
+N_VIEWS, N_CALIB = 30, 20
+
+
+def methods() -> dict:
+    def opencv(subpix: bool):
+        dp = cv2.aruco.DetectorParameters()
+        if subpix:
+            dp.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+        det = cv2.aruco.CharucoDetector(BOARD.opencv, cv2.aruco.CharucoParameters(), dp)
+
+        def run(img):
+            corners, ids, _, _ = det.detectBoard(img)
+            if ids is None:
+                return CharucoCorners(np.zeros(0, np.int64), np.zeros((0, 2)))
+            return CharucoCorners(ids.ravel().astype(np.int64), corners.reshape(-1, 2).astype(np.float64))
+        return run
+
+    return {"visloc": lambda img: detect_charuco(img, BOARD), "opencv": opencv(False),
+            "opencv_subpix": opencv(True)}
+
+
+def _calibrate(name: str, views: list[CharucoCorners]):
+    """(K, dist) from the views: visloc's calibrate for visloc, cv2.calibrateCamera for the peers."""
+    if name == "visloc":
+        cal = calibrate(views, BOARD, SIZE)
+        return cal.K, cal.dist
+    use = [v for v in views if len(v) >= 6]
+    obj = [BOARD.chessboard_corners[v.ids].astype(np.float32) for v in use]
+    img = [v.corners.astype(np.float32).reshape(-1, 1, 2) for v in use]
+    _, K, dist, _, _ = cv2.calibrateCamera(obj, img, SIZE, None, None)
+    return K, np.ravel(dist)
+
+
+def _holdout_rms(K, dist, views) -> float:
+    """RMS reprojection error of held-out views' true corners, each view's pose solved."""
+    err = []
+    for v in views:
+        ids = np.flatnonzero(v.visible)
+        obj, truth = BOARD.chessboard_corners[ids], v.corners[ids]
+        ok, rvec, tvec = cv2.solvePnP(obj, truth, K, dist)
+        if not ok:
+            continue
+        rvec, tvec = cv2.solvePnPRefineLM(obj, truth, K, dist, rvec, tvec)
+        proj = cv2.projectPoints(obj, rvec, tvec, K, dist)[0].reshape(-1, 2)
+        err.extend(np.linalg.norm(proj - truth, axis=1))
+    return float(np.sqrt(np.mean(np.square(err))))
+
+
+def run(seeds: list[int]) -> dict:
+    run_ = methods()
+    stats = {m: {"found": 0, "visible": 0, "errors": [], "f_err": [], "c_err": [], "holdout_rms": [], "seconds": []}
+             for m in run_}
+    for seed in seeds:
+        print(f"calibrate: view set {seed} ...", file=sys.stderr, flush=True)
+        views = calibration_views(BOARD, N_VIEWS, size=SIZE, seed=seed)
+        truth_K = views[0].render.K
+        found = {m: [None] * len(views) for m in run_}
+        spent = dict.fromkeys(run_, 0.0)
+        for k, view in enumerate(views):
+            order = list(run_) if k % 2 == 0 else list(run_)[::-1]
+            for m in order:
+                t0 = time.perf_counter()
+                found[m][k] = run_[m](view.image)
+                spent[m] += time.perf_counter() - t0
+        for m in run_:
+            s = stats[m]
+            for view, f in zip(views, found[m], strict=True):
+                s["visible"] += int(view.visible.sum())
+                s["found"] += len(f)
+                s["errors"].extend(np.linalg.norm(f.corners - view.corners[f.ids], axis=1).tolist())
+            K, dist = _calibrate(m, found[m][:N_CALIB])
+            s["f_err"].extend([abs(K[0, 0] - truth_K[0, 0]), abs(K[1, 1] - truth_K[1, 1])])
+            s["c_err"].extend([abs(K[0, 2] - truth_K[0, 2]), abs(K[1, 2] - truth_K[1, 2])])
+            s["holdout_rms"].append(_holdout_rms(K, dist, views[N_CALIB:]))
+            t0 = time.perf_counter()
+            _calibrate(m, found[m])
+            s["seconds"].append(spent[m] + time.perf_counter() - t0)
+    out = {}
+    for m, s in stats.items():
+        e = np.array(s["errors"])
+        out[m] = {"found": s["found"], "visible": s["visible"], "corner_rms_px": float(np.sqrt(np.mean(e**2))),
+                  "corner_median_px": float(np.median(e)), "f_err_px_mean": float(np.mean(s["f_err"])),
+                  "c_err_px_mean": float(np.mean(s["c_err"])), "holdout_rms_px": float(np.mean(s["holdout_rms"])),
+                  "seconds_30_views_median": float(np.median(s["seconds"]))}
+    return out
+
+
+def markdown(result: dict) -> str:
+    res = result["methods"]
+    lines = [(f"\n**ChArUco calibration**, {SIZE[0]}x{SIZE[1]} camera-like views of a 9 x 6 board, "
+             f"{len(result['seeds'])} sets of {N_VIEWS} views (calibrated from {N_CALIB}, {N_VIEWS - N_CALIB} held out; "
+             "errors against the truth)\n"),
+             ("| method | corners found / visible | corner RMS px | corner median px | fx, fy error px (mean) | "
+             "cx, cy error px (mean) | held-out reprojection RMS px | s to calibrate from 30 views |"),
+             "|---|---|---|---|---|---|---|---|"]
+    for m, s in res.items():
+        lines.append(f"| {m} | {s['found']}/{s['visible']} | {fmt(s['corner_rms_px'])} | {fmt(s['corner_median_px'])} | "
+                     f"{fmt(s['f_err_px_mean'], 2)} | {fmt(s['c_err_px_mean'], 2)} | {fmt(s['holdout_rms_px'], 4)} | "
+                     f"{fmt(s['seconds_30_views_median'], 2)} |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sets", type=int, default=3)
+    ap.add_argument("--out", default=str(ROOT / "bench/results"))
+    args = ap.parse_args(argv)
+    seeds = list(range(args.sets))
+    result = {"machine": {"python": sys.version.split()[0], "opencv": cv2.__version__, "numpy": np.__version__,
+                          "platform": platform.platform(), "cores": len(__import__("os").sched_getaffinity(0))},
+              "seeds": seeds, "methods": run(seeds)}
+    write_results(args.out, "calibrate", result, markdown(result))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,146 @@
+"""Camera calibration from a board's corners in several views: ``cv2.calibrateCamera``.
+
+The solver is OpenCV's (``calibrateCameraExtended``: Levenberg-Marquardt over the intrinsics,
+the distortion and every view's pose, started from Zhang's closed form); visloc brings the
+corners (:func:`visloc.boards.detect_charuco`) and the bookkeeping: views with too few corners
+are left out, and the result carries the RMS reprojection error, each view's error and the
+parameters' standard deviations, written into the camera file ``Camera.from_file`` reads.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from visloc.boards.charuco import CharucoBoard, CharucoCorners
+
+__all__ = ["CALIBRATION_MODELS", "Calibration", "calibrate"]
+
+FloatArray = NDArray[np.float64]
+
+#: Distortion models: name -> ``cv2.calibrateCamera`` flags. ``pinhole-k1k2``: two radial
+#: terms; ``k1k2p1p2k3``: OpenCV's default five; ``rational``: eight (k4-k6 in the denominator).
+CALIBRATION_MODELS = {
+    "pinhole-k1k2": cv2.CALIB_FIX_K3 | cv2.CALIB_ZERO_TANGENT_DIST,
+    "k1k2p1p2k3": 0,
+    "rational": cv2.CALIB_RATIONAL_MODEL,
+}
+
+
+@dataclass(frozen=True, eq=False)
+class Calibration:
+    """A calibrated camera.
+
+    Attributes
+    ----------
+    K : ndarray (3, 3)
+        Camera matrix, px (pixel centres at integer coordinates).
+    dist : ndarray (n,)
+        OpenCV distortion coefficients (k1, k2, p1, p2, k3[, k4, k5, k6]).
+    size : (int, int)
+        ``(width, height)`` of the images, px.
+    rms : float
+        RMS reprojection error over all corners of the views used, px.
+    per_view : ndarray (V,)
+        Each used view's RMS reprojection error, px.
+    std : ndarray (4 + n,)
+        Standard deviations of fx, fy, cx, cy (px) and the distortion coefficients.
+    views : list of int
+        Indices of the views used (into the list given to :func:`calibrate`).
+    model : str
+        The distortion model (:data:`CALIBRATION_MODELS`).
+    rvecs, tvecs : ndarray (V, 3)
+        Each used view's board-to-camera rotation vector and translation (board units).
+    """
+
+    K: FloatArray
+    dist: FloatArray
+    size: tuple[int, int]
+    rms: float
+    per_view: FloatArray
+    std: FloatArray
+    views: list[int]
+    model: str
+    rvecs: FloatArray
+    tvecs: FloatArray
+
+    def to_file(self, path: str | Path) -> Path:
+        """Write the camera file (OpenCV FileStorage YAML, as ``Camera.from_file`` reads it)
+        with the calibration's figures.
+
+        Parameters
+        ----------
+        path : str or Path
+            Output file.
+
+        Returns
+        -------
+        Path
+        """
+        path = Path(path)
+        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+        try:
+            fs.write("image_width", int(self.size[0]))
+            fs.write("image_height", int(self.size[1]))
+            fs.write("camera_matrix", np.asarray(self.K, np.float64))
+            fs.write("distortion_coefficients", np.asarray(self.dist, np.float64).reshape(1, -1))
+            fs.write("distortion_model", self.model)
+            fs.write("reprojection_rms_px", float(self.rms))
+            fs.write("per_view_rms_px", np.asarray(self.per_view, np.float64).reshape(1, -1))
+            fs.write("std_fx_fy_cx_cy_dist", np.asarray(self.std, np.float64).reshape(1, -1))
+            fs.write("views_used", len(self.views))
+        finally:
+            fs.release()
+        return path
+
+
+def calibrate(views: list[CharucoCorners], board: CharucoBoard, size: tuple[int, int], *,
+              model: str = "k1k2p1p2k3", min_corners: int = 6) -> Calibration:
+    """Calibrate a camera from a board's corners in several views.
+
+    Parameters
+    ----------
+    views : list of CharucoCorners
+        The corners found in each image (:func:`visloc.boards.detect_charuco`).
+    board : CharucoBoard
+        The board.
+    size : (int, int)
+        ``(width, height)`` of the images, px.
+    model : str
+        Distortion model, a key of :data:`CALIBRATION_MODELS`.
+    min_corners : int
+        Views with fewer corners are left out (>= 6: a homography and some slack per view).
+
+    Returns
+    -------
+    Calibration
+
+    Raises
+    ------
+    ValueError
+        An unknown model, a bad size, or fewer than 3 views with ``min_corners`` corners.
+    """
+    if model not in CALIBRATION_MODELS:
+        raise ValueError(f"model must be one of {sorted(CALIBRATION_MODELS)}, got {model!r}")
+    if isinstance(min_corners, bool) or int(min_corners) != min_corners or min_corners < 6:
+        raise ValueError(f"min_corners must be an integer >= 6, got {min_corners!r}")
+    w, h = (int(v) for v in size)
+    if w < 16 or h < 16:
+        raise ValueError(f"size must be at least 16 x 16 px, got {size}")
+    used = [i for i, v in enumerate(views) if len(v) >= min_corners]
+    if len(used) < 3:
+        raise ValueError(f"calibration needs at least 3 views with {min_corners} or more board corners; "
+                         f"{len(used)} of {len(views)} have them")
+    obj = [board.chessboard_corners[views[i].ids].astype(np.float32) for i in used]
+    img = [views[i].corners.astype(np.float32).reshape(-1, 1, 2) for i in used]
+    flags = CALIBRATION_MODELS[model]
+    rms, K, dist, rvecs, tvecs, std_in, _, per_view = cv2.calibrateCameraExtended(
+        obj, img, (w, h), None, None, flags=flags)
+    n = len(np.ravel(dist)) if model != "pinhole-k1k2" else 5
+    return Calibration(np.asarray(K, np.float64), np.ravel(dist).astype(np.float64)[:n], (w, h), float(rms),
+                       np.ravel(per_view).astype(np.float64), np.ravel(std_in).astype(np.float64)[: 4 + n], used,
+                       model, np.array(rvecs, np.float64).reshape(-1, 3), np.array(tvecs, np.float64).reshape(-1, 3))

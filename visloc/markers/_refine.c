@@ -2,7 +2,8 @@
  *
  * The algorithm of visloc.markers.refine.refine_quads, one quad after another: grey levels
  * along `count` normals across each side (offsets -r .. r px), black and white levels as the
- * medians of the innermost and outermost samples, the edge on each profile from the area of
+ * medians of the innermost and outermost samples (quads with a side of BEND_MIN_SIDE px or
+ * more: each side's own, where the light varies significantly: side_levels), the edge on each profile from the area of
  * the normalised step (e = r + 1/2 - sum v), profiles without a clean step dropped, weighted
  * total-least-squares lines (outliers of the last pass's first fit dropped), corners at their
  * intersections; `iterations` passes, each centred on the previous pass's lines. See
@@ -116,6 +117,46 @@ static double select_rank(double *v, int64_t n, int64_t k) {
     return v[k];
 }
 
+/* The median (upper middle) of v[0 .. n); `sorted` is n doubles of scratch. */
+static double median_of(const double *v, int64_t n, double *sorted) {
+    memcpy(sorted, v, (size_t)n * sizeof(double));
+    return select_rank(sorted, n, n / 2);
+}
+
+/* The noise of a quad's end samples v[4 n] (four sides of n profiles): 1.4826 x the median
+ * absolute difference of neighbouring profiles' samples along a side, over sqrt 2 (a smooth
+ * change of the light along a side leaves it alone). `sorted` is 4 n doubles of scratch. */
+static double noise_of(const double *v, int64_t n, double *sorted) {
+    int64_t k = 0;
+    for (int s = 0; s < 4; s++)
+        for (int64_t m = 1; m < n; m++) sorted[k++] = fabs(v[s * n + m] - v[s * n + m - 1]);
+    return k ? 1.4826 / sqrt(2.0) * select_rank(sorted, k, k / 2) : 0.0;
+}
+
+/* One side's level (black from the innermost samples `ends` of its n profiles, or white from
+ * the outermost) at each profile, into out[n]: the line along the side through the medians of
+ * its first and second half (each at its half's middle) where their difference is significant
+ * (over LEVEL_Z standard errors of a difference of medians, from the quad's spread `sd`: the
+ * light varies along the side: vignetting, shading), else the side's median where it differs
+ * significantly from the quad's level `quad`, else `quad` (with few or noisy samples the
+ * quad's level is the better estimate). `sorted` is n doubles of scratch. */
+#define LEVEL_Z 3.0
+static void side_levels(const double *ends, int64_t n, double quad, double sd, double *sorted, double *out) {
+    int64_t h1 = n / 2, h2 = n - h1;
+    double level = quad;
+    if (h1 >= 2) {
+        double c1 = 0.5 * (double)(h1 - 1), c2 = (double)h1 + 0.5 * (double)(h2 - 1);
+        double m1 = median_of(ends, h1, sorted), m2 = median_of(ends + h1, h2, sorted);
+        if (fabs(m2 - m1) > LEVEL_Z * 1.2533 * sd * sqrt(2.0 / (double)h1)) {
+            for (int64_t m = 0; m < n; m++) out[m] = m1 + (m2 - m1) * ((double)m - c1) / (c2 - c1);
+            return;
+        }
+        double side = median_of(ends, n, sorted);
+        if (fabs(side - quad) > LEVEL_Z * 1.2533 * sd / sqrt((double)n)) level = side;
+    }
+    for (int64_t m = 0; m < n; m++) out[m] = level;
+}
+
 /* The edge on a profile of 2 r + 1 samples, relative to its centre, px, positive outward:
  * refine.py's area of the step normalised between lo and lo + span. */
 static double step_offset(const double *pr, int64_t width, double lo, double span, int64_t r) {
@@ -211,7 +252,7 @@ static void bend_one(const image *im, double q[8], int64_t r, double *work) {
     const int64_t width = 2 * r + 1, n = BEND_COUNT, n4 = 4 * BEND_COUNT;
     double *p_in = work, *p_out = work + n4, *sorted = work + 2 * n4, *off = work + 3 * n4, *w = work + 4 * n4;
     double *prof = work + 5 * n4;
-    double t[BEND_COUNT], normal[4][2];
+    double t[BEND_COUNT], normal[4][2], levels[2 * BEND_COUNT];
     for (int64_t m = 0; m < n; m++) t[m] = BEND_GAP + (1 - 2 * BEND_GAP) * (double)m / (double)(n - 1);
     for (int s = 0; s < 4; s++) {
         const double *a = q + 2 * s, *b = q + 2 * ((s + 1) % 4);
@@ -229,15 +270,20 @@ static void bend_one(const image *im, double q[8], int64_t r, double *work) {
         }
     }
     memcpy(sorted, p_in, (size_t)n4 * sizeof(double));
-    double lo = select_rank(sorted, n4, 2 * n);
+    double lo_q = select_rank(sorted, n4, 2 * n);
     memcpy(sorted, p_out, (size_t)n4 * sizeof(double));
-    double hi = select_rank(sorted, n4, 2 * n);
-    double span = hi - lo > 1e-6 ? hi - lo : 1e-6, cf[4][3], out[8];
+    double hi_q = select_rank(sorted, n4, 2 * n);
+    double sd_lo = noise_of(p_in, n, sorted), sd_hi = noise_of(p_out, n, sorted);
+    double cf[4][3], out[8];
     for (int s = 0; s < 4; s++) {
+        double *lo = levels, *hi = levels + n; /* levels as refine_one reads those of large quads */
+        side_levels(p_in + s * n, n, lo_q, sd_lo, sorted, lo);
+        side_levels(p_out + s * n, n, hi_q, sd_hi, sorted, hi);
         for (int64_t m = 0; m < n; m++) {
             int64_t j = s * n + m;
-            off[j] = step_offset(prof + j * width, width, lo, span, r);
-            w[j] = (p_out[j] - p_in[j]) > 0.5 * (hi - lo) && fabs(off[j]) < (double)r;
+            double span = hi[m] - lo[m] > 1e-6 ? hi[m] - lo[m] : 1e-6;
+            off[j] = step_offset(prof + j * width, width, lo[m], span, r);
+            w[j] = (p_out[j] - p_in[j]) > 0.5 * (hi[m] - lo[m]) && fabs(off[j]) < (double)r;
         }
         double *o = off + s * n, *ws = w + s * n;
         if (!fit_curve(t, o, ws, n, cf[s])) return;
@@ -294,16 +340,29 @@ static int refine_one(const image *im, double q[8], int64_t r, int iterations, i
         double lo = select_rank(sorted, n4, 2 * count);
         memcpy(sorted, p_out, (size_t)n4 * sizeof(double));
         double hi = select_rank(sorted, n4, 2 * count);
-        double span = hi - lo > 1e-6 ? hi - lo : 1e-6;
         if (!(to_grey(im->lut, hi) - to_grey(im->lut, lo) >= 4.0)) return 0; /* no contrast (grey levels) */
+        int long_sides = longest_side(cur) >= BEND_MIN_SIDE;
+        double sd_lo = long_sides ? noise_of(p_in, count, sorted) : 0.0;
+        double sd_hi = long_sides ? noise_of(p_out, count, sorted) : 0.0;
         double lines[4][3];
         for (int s = 0; s < 4; s++) {
             int64_t n_good = 0;
             double *px = ex + s * count, *py = ey + s * count, *w = wt + s * count;
+            double *lo_s = res, *hi_s = res + count; /* levels profile by profile */
+            if (long_sides) { /* large quads: the light along each side where it varies significantly */
+                side_levels(p_in + s * count, count, lo, sd_lo, sorted, lo_s);
+                side_levels(p_out + s * count, count, hi, sd_hi, sorted, hi_s);
+            } else { /* small ones: the whole quad's (fewer samples per side: noisier) */
+                for (int64_t m = 0; m < count; m++) {
+                    lo_s[m] = lo;
+                    hi_s[m] = hi;
+                }
+            }
             for (int64_t m = 0; m < count; m++) {
-                double e = step_offset(prof + (s * count + m) * width, width, lo, span, r);
+                double span = hi_s[m] - lo_s[m] > 1e-6 ? hi_s[m] - lo_s[m] : 1e-6;
+                double e = step_offset(prof + (s * count + m) * width, width, lo_s[m], span, r);
                 int j = s * count + m;
-                w[m] = (p_out[j] - p_in[j]) > 0.5 * (hi - lo) && fabs(e) < (double)r;
+                w[m] = (p_out[j] - p_in[j]) > 0.5 * (hi_s[m] - lo_s[m]) && fabs(e) < (double)r;
                 n_good += w[m] > 0;
                 px[m] += e * normal[s][0];
                 py[m] += e * normal[s][1];

@@ -47,6 +47,7 @@ _END_GAP = 0.15  # fraction of each side left out at both ends (sample_edge_prof
 _MAX_RADIUS = 64
 _LEVELS = np.arange(256, dtype=np.float64)
 _BEND_MIN_SIDE = 40.0  # px: markers with shorter sides keep them straight (as _refine.c)
+_LEVEL_Z = 3.0  # standard errors for a side's own levels (_side_levels, as _refine.c)
 
 __all__ = ["NATIVE_REFINE", "bend_corners", "edge_offsets", "refine_quads", "sample_edge_profiles"]
 
@@ -141,12 +142,17 @@ def edge_offsets(profiles: NDArray, black: NDArray | float, white: NDArray | flo
     return radius + 0.5 - v.sum(axis=-1)
 
 
-def _step_offsets(prof: NDArray, r: NDArray, big: int) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+def _step_offsets(prof: NDArray, r: NDArray, big: int, long_sides: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray]:
     """The edge on each profile (K, 4, M, 2 big + 1) of quads with profile half-widths ``r``
     (K,), from the area of the normalised step (module docstring), as offsets (K, 4, M) from
     the profile centres; which profiles crossed a clean step (occlusion or a neighbouring
     edge makes outliers); and each quad's black and white levels (K,): the medians (upper
-    middle) of its innermost and outermost samples. ``prof`` is normalised in place."""
+    middle) of its innermost and outermost samples. The steps of quads with ``long_sides``
+    (K,) are normalised by levels that follow the light along each side (:func:`_side_levels`):
+    across a large quad the light varies (vignetting, shading), and one pair of levels for the
+    whole quad moved the edges of 100 px squares under 25 % vignetting by about 0.1 px (the
+    area of the step counts a level error once per sample); the others' by the quad's levels
+    (a small quad's side has too few samples for its own). ``prof`` is normalised in place."""
     k, m = len(prof), prof.shape[2]
     kk = np.arange(k)
     half = 2 * m  # of the 4 m inner (outer) end samples of each quad
@@ -154,14 +160,51 @@ def _step_offsets(prof: NDArray, r: NDArray, big: int) -> tuple[NDArray, NDArray
     p_out = prof[kk, :, :, big + r]
     lo = np.partition(p_in.reshape(k, -1), half, axis=1)[:, half]
     hi = np.partition(p_out.reshape(k, -1), half, axis=1)[:, half]
-    prof -= lo[:, None, None, None]  # (I - black) / (white - black), clipped to [0, 1]
-    prof /= np.maximum(hi - lo, 1e-6)[:, None, None, None]
+    along = long_sides[:, None, None]
+    lo_s = np.where(along, _side_levels(p_in, lo), lo[:, None, None])  # (K, 4, M)
+    hi_s = np.where(along, _side_levels(p_out, hi), hi[:, None, None])
+    prof -= lo_s[..., None]  # (I - black) / (white - black), clipped to [0, 1]
+    prof /= np.maximum(hi_s - lo_s, 1e-6)[..., None]
     np.clip(prof, 0.0, 1.0, out=prof)
     inside = (np.abs(np.arange(-big, big + 1))[None, :] <= r[:, None]).astype(np.float32)[:, None, None, :]
     r3 = r[:, None, None].astype(np.float64)
     e = r3 + 0.5 - np.vecdot(prof, inside)
-    good = ((p_out - p_in) > 0.5 * (hi - lo)[:, None, None]) & (np.abs(e) < r3)
+    good = ((p_out - p_in) > 0.5 * (hi_s - lo_s)) & (np.abs(e) < r3)
     return e, good, lo, hi
+
+
+def _longest_sides(q: NDArray) -> NDArray:
+    """Each quad's (K, 4, 2) longest side, px."""
+    return np.sqrt(((q[:, _NEXT] - q) ** 2).sum(axis=-1)).max(axis=1)
+
+
+def _side_levels(ends: NDArray, quad: NDArray) -> NDArray:
+    """Each side's level (black from the innermost samples, white from the outermost) at each
+    of its M profiles (K, 4, M), from the end samples ``ends`` (K, 4, M) and the quad's level
+    ``quad`` (K,): the line along the side through the medians (upper middle) of its first and
+    second half, each at its half's middle, where their difference is significant (over
+    :data:`_LEVEL_Z` standard errors of a difference of medians, from the quad's noise:
+    the light varies along the side), else the side's median where it differs significantly
+    from the quad's level, else the quad's level (as ``_refine.c``)."""
+    k, _, m = ends.shape
+    out = np.broadcast_to(quad[:, None, None], ends.shape).copy()
+    h1, h2 = m // 2, m - m // 2
+    if h1 < 2:
+        return out
+    # the noise: neighbouring profiles' samples differ by it (times sqrt 2), not by a smooth change
+    steps = np.abs(np.diff(ends, axis=-1)).reshape(k, -1)
+    half = steps.shape[1] // 2
+    sd = 1.4826 / np.sqrt(2.0) * np.partition(steps, half, axis=1)[:, half]  # (K,)
+    m1 = np.partition(ends[..., :h1], h1 // 2, axis=-1)[..., h1 // 2]  # (K, 4)
+    m2 = np.partition(ends[..., h1:], h2 // 2, axis=-1)[..., h2 // 2]
+    side = np.partition(ends, m // 2, axis=-1)[..., m // 2]
+    c1, c2 = 0.5 * (h1 - 1), h1 + 0.5 * (h2 - 1)
+    sloped = np.abs(m2 - m1) > _LEVEL_Z * 1.2533 * sd[:, None] * np.sqrt(2.0 / h1)
+    shifted = ~sloped & (np.abs(side - quad[:, None]) > _LEVEL_Z * 1.2533 * sd[:, None] / np.sqrt(m))
+    line = m1[..., None] + (m2 - m1)[..., None] * ((np.arange(m) - c1) / (c2 - c1))
+    out[sloped] = line[sloped]
+    out[shifted] = side[shifted][:, None]
+    return out
 
 
 def refine_quads(
@@ -246,7 +289,7 @@ def refine_quads(
     ok_all = np.ones(k, bool)
     for it in range(iterations):
         base, normals, prof = sample_edge_profiles(light, q, big, count=count, end_gap=_END_GAP)
-        e, good, lo, hi = _step_offsets(prof, r, big)
+        e, good, lo, hi = _step_offsets(prof, r, big, _longest_sides(q) >= _BEND_MIN_SIDE)
         pts = (base + e[..., None] * normals[:, :, None, :]).reshape(k * 4, count, 2)
         w = good.reshape(k * 4, count).astype(np.float64)
         lines = fit_lines(pts, w)
@@ -265,7 +308,7 @@ def refine_quads(
         ok_all &= move <= max_move  # False for NaN too
         q[ok_all] = new[ok_all]
     q[~ok_all] = q0[~ok_all]
-    long_side = np.linalg.norm(q[:, _NEXT] - q, axis=2).max(axis=1) >= _BEND_MIN_SIDE
+    long_side = _longest_sides(q) >= _BEND_MIN_SIDE
     if bend and (ok_all & long_side).any():  # short sides bend by a small fraction of a pixel
         pick = ok_all & long_side
         q[pick] = bend_corners(gray, q[pick], radius=r[pick], response=response)
@@ -330,7 +373,7 @@ def bend_corners(
     x1, y1 = np.minimum((np.ceil(q.reshape(-1, 2).max(axis=0)) + big + 3).astype(int), [w_img, h])
     light = _to_light(gray[y0:y1, x0:x1], response)
     _, normals, prof = sample_edge_profiles(light, q - [x0, y0], big, count=count, end_gap=end_gap)
-    e, good, _, _ = _step_offsets(prof, r, big)  # offsets of the edge from the sides, px
+    e, good, _, _ = _step_offsets(prof, r, big, np.ones(len(prof), bool))  # offsets from the sides, px
     w = good.astype(np.float64)
     t = np.linspace(end_gap, 1 - end_gap, count)
     basis = np.stack([np.ones(count), t, t * t], axis=-1)  # (M, 3)

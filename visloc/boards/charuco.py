@@ -346,37 +346,19 @@ def detect_charuco(image: NDArray, board: CharucoBoard, *, detector: MarkerDetec
     return CharucoCorners(ids[ok], corners[ok], *markers, dropped=int((~ok).sum()))
 
 
-def _homography(board: CharucoBoard, found: dict[int, FloatArray], near: list[int]) -> FloatArray | None:
-    """Board plane -> image homography of the found markers among ``near`` (None: none found)."""
-    near = [k for k in near if k in found]
-    if not near:
-        return None
-    src = np.concatenate([board.marker_corners[k, :, :2] for k in near]).astype(np.float64)
-    dst = np.concatenate([found[k] for k in near]).astype(np.float64)
-    H, _ = cv2.findHomography(src, dst, 0)
-    return H if H is not None and np.all(np.isfinite(H)) else None
-
-
 def _refine_by_squares(gray: NDArray[np.uint8], board: CharucoBoard, found: dict[int, FloatArray],
                        ids: NDArray[np.int64], response: str | float) -> tuple[FloatArray, NDArray[np.bool_]]:
     """Corners ``ids`` as the mean of the refined corners of the black squares that have them:
-    each black square next to a found marker is predicted by those markers' homography and
+    each black square next to a found marker is predicted by those markers' homographies and
     refined by the marker detector's stages 8 and 8b (:func:`visloc.markers.refine.refine_quads`:
     its four edges fitted to the light across them, curved under lens distortion, the corners
     where they meet), with profiles half as wide as the white margin between the square and
     the markers beside it. Squares not wholly inside the image are left out."""
     plane, corner_ids, near = board.black_squares
-    quads, rows = [], []
-    for b, nb in enumerate(near):
-        if (corner_ids[b] < 0).all():
-            continue
-        H = _homography(board, found, nb.tolist())
-        if H is None:
-            continue
-        q = cv2.perspectiveTransform(plane[b][None], H)[0]
-        if np.all(np.isfinite(q)):
-            quads.append(q)
-            rows.append(b)
+    H, have = _marker_homographies(board, found)
+    predicted, ok = _mean_prediction(H, have, _padded(near), plane)  # the markers' predictions, averaged
+    rows = np.flatnonzero(ok & (corner_ids >= 0).any(axis=1) & np.isfinite(predicted).all(axis=(1, 2))).tolist()
+    quads = [predicted[b] for b in rows]
     sums = np.zeros((len(board.chessboard_corners), 2))
     counts = np.zeros(len(board.chessboard_corners))
     if quads:
@@ -403,34 +385,55 @@ def _refine_by_squares(gray: NDArray[np.uint8], board: CharucoBoard, found: dict
 
 
 def _predict(board: CharucoBoard, found: dict[int, FloatArray]) -> tuple[NDArray[np.int64], FloatArray, FloatArray]:
-    """Chessboard corners predicted by the homography of the found markers next to each:
-    ids (N,), positions (N, 2) px, and the local size of a square (N,) px."""
-    plane = board.marker_corners[:, :, :2]
-    ids, points, scales = [], [], []
-    for j, adjacent in enumerate(board.adjacent_markers):
-        near = [k for k in adjacent.tolist() if k in found]
-        if not near:
-            continue
-        src = np.concatenate([plane[k] for k in near]).astype(np.float64)
-        dst = np.concatenate([found[k] for k in near]).astype(np.float64)
-        H, _ = cv2.findHomography(src, dst, 0)
-        if H is None or not np.all(np.isfinite(H)):
-            continue
-        c = board.chessboard_corners[j, :2]
-        p = H @ np.array([c[0], c[1], 1.0])
-        if not p[2] > 0:
-            continue
-        q = p[:2] / p[2]
-        # the square's size in px there: the mapped square's area
-        sq = np.array([c, c + (board.square_length, 0.0), c + (board.square_length, board.square_length),
-                       c + (0.0, board.square_length)])
-        m = (H @ np.column_stack([sq, np.ones(4)]).T).T
-        m = m[:, :2] / m[:, 2:3]
-        area = 0.5 * abs(np.dot(m[:, 0], np.roll(m[:, 1], -1)) - np.dot(np.roll(m[:, 0], -1), m[:, 1]))
-        ids.append(j)
-        points.append(q)
-        scales.append(np.sqrt(area))
-    return np.array(ids, np.int64), np.array(points, np.float64).reshape(-1, 2), np.array(scales, np.float64)
+    """Chessboard corners predicted by the homographies of the found markers next to each (the
+    mean of their predictions): ids (N,), positions (N, 2) px, and the local size of a square
+    (N,) px."""
+    H, have = _marker_homographies(board, found)
+    c = board.chessboard_corners[:, :2]
+    pred, ok = _mean_prediction(H, have, _padded(board.adjacent_markers), c[:, None, :])  # (C, 1, 2)
+    s = board.square_length
+    square = c[:, None, :] + np.array([[0.0, 0.0], [s, 0.0], [s, s], [0.0, s]])  # (C, 4, 2)
+    sq, _ = _mean_prediction(H, have, _padded(board.adjacent_markers), square)
+    x, y = sq[..., 0], sq[..., 1]
+    scale = np.sqrt(np.abs(0.5 * ((x * np.roll(y, -1, axis=1)).sum(1) - (np.roll(x, -1, axis=1) * y).sum(1))))
+    ok &= np.isfinite(scale)
+    ids = np.flatnonzero(ok)
+    return ids.astype(np.int64), pred[ids, 0], scale[ids]
+
+
+def _padded(groups: list[NDArray[np.int64]]) -> NDArray[np.int64]:
+    """Lists of marker indices as a (G, W) array padded with -1."""
+    width = max((len(g) for g in groups), default=0)
+    out = np.full((len(groups), max(width, 1)), -1, np.int64)
+    for i, g in enumerate(groups):
+        out[i, : len(g)] = g
+    return out
+
+
+def _marker_homographies(board: CharucoBoard, found: dict[int, FloatArray]) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """Board plane -> image homographies (M, 3, 3) of the board's markers from their four found
+    corners, and which were found."""
+    H = np.full((len(board.marker_ids), 3, 3), np.nan)
+    for k, corners in found.items():
+        H[k] = cv2.getPerspectiveTransform(board.marker_corners[k, :, :2].astype(np.float32),
+                                           np.asarray(corners, np.float32))
+    return H, np.isfinite(H).all(axis=(1, 2))
+
+
+def _mean_prediction(H: FloatArray, have: NDArray[np.bool_], near: NDArray[np.int64],
+                     points: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """Per group g, its points (G, P, 2) mapped by each found marker of ``near[g]`` (G, W) and
+    averaged; and whether a group had any (points in front of the camera)."""
+    idx = np.where(near >= 0, near, 0)
+    use = (near >= 0) & have[idx]  # (G, W)
+    Hs = H[idx]  # (G, W, 3, 3)
+    hom = np.concatenate([points, np.ones(points.shape[:2] + (1,))], axis=2)  # (G, P, 3)
+    p = np.einsum("gwij,gpj->gwpi", np.nan_to_num(Hs), hom)  # (G, W, P, 3)
+    front = (p[..., 2] > 0).all(axis=2) & use  # (G, W)
+    xy = p[..., :2] / np.where(p[..., 2:3] > 0, p[..., 2:3], 1.0)
+    n = front.sum(axis=1)
+    mean = (xy * front[..., None, None]).sum(axis=1) / np.maximum(n, 1)[:, None, None]
+    return mean, n > 0
 
 
 def refine_saddles(light: NDArray, points: NDArray, *, radius: int | NDArray = 4, iterations: int = 4,

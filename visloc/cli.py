@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import glob
+import importlib
 import os
 import sys
 from collections.abc import Sequence
@@ -19,7 +20,7 @@ from typing import NoReturn
 from visloc import __version__
 from visloc.errors import UsageError
 
-__all__ = ["UsageError", "build_parser", "check_outputs", "main"]
+__all__ = ["UsageError", "build_parser", "check_inputs", "check_outputs", "main"]
 
 
 
@@ -316,6 +317,12 @@ def _detector_arguments(p: argparse.ArgumentParser) -> None:
                    help="white-on-black markers: no (default), yes (only those), both")
 
 
+#: sub-command -> (module of visloc.commands, function)
+_COMMANDS = {"detect": ("markers", "detect"), "render": ("markers", "render"), "demo": ("demo", "demo"),
+             "flow": ("flow", "flow"), "track": ("localize", "track"), "localize": ("localize", "localize"),
+             "model": ("model", "model"), "robust": ("robust", "robust"), "sim": ("sim", "sim"),
+             "calibrate": ("calibrate", "calibrate_camera")}
+
 #: options naming files or folders a command reads, and those it writes
 _INPUTS = ("source", "camera", "map", "height_csv", "imu", "truth", "dict", "body", "reference", "board")
 _OUTPUTS = ("out", "annotate", "rerun", "explain", "plot", "outdir", "output")
@@ -336,6 +343,32 @@ def _inputs(args: argparse.Namespace) -> tuple[list[Path], list[Path]]:
         elif name == "source" and glob.has_magic(v):
             files += [Path(f).resolve() for f in glob.glob(v)]
     return files, folders
+
+
+def check_inputs(args: argparse.Namespace) -> None:
+    """Refuse (:class:`UsageError`) an input file or folder that does not exist, before the
+    command's modules are imported. A ``source`` that is a camera index, a glob pattern or a
+    URL is left to the command, as is ``--dict`` (a dictionary name or a file).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        A parsed command line (:func:`build_parser`).
+
+    Raises
+    ------
+    UsageError
+        Naming the option and the path.
+    """
+    for name in _INPUTS:
+        v = getattr(args, name, None)
+        if name == "dict" or not isinstance(v, str) or not v:
+            continue
+        if name == "source" and (v.isdigit() or glob.has_magic(v) or "://" in v):
+            continue
+        if not Path(v).exists():
+            what = "path" if name == "source" else f"--{name.replace('_', '-')}"
+            raise UsageError(f"{what} does not exist: {v}")
 
 
 def check_outputs(args: argparse.Namespace) -> None:
@@ -402,14 +435,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command == "render" and args.what in ("localize", "flow") and args.seconds * args.fps > MAX_RENDER_FRAMES:
         parser.error(f"render {args.what}: --seconds x --fps is {args.seconds * args.fps:g} frames, at most "
                      f"{MAX_RENDER_FRAMES} (they are rendered in memory)")
-    from visloc import commands  # imported late: `visloc --help` stays fast
-
-    run = {"detect": commands.detect, "render": commands.render, "demo": commands.demo,
-           "flow": commands.flow, "track": commands.track, "localize": commands.localize,
-           "model": commands.model, "robust": commands.robust, "sim": commands.sim,
-           "calibrate": commands.calibrate_camera}[args.command]
+    # only the sub-command's own module is imported (late: `visloc --help`, `visloc model` and
+    # configuration errors stay fast)
+    module, name = _COMMANDS[args.command]
     try:
+        check_inputs(args)  # before the command's imports: a missing file is said at once
         check_outputs(args)
+        run = getattr(importlib.import_module(f"visloc.commands.{module}"), name)
         return run(args)
     except KeyboardInterrupt:
         print("visloc: interrupted; results written so far are kept", file=sys.stderr)

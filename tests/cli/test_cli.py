@@ -233,12 +233,12 @@ def test_an_output_that_would_overwrite_an_input_is_refused(rendered, tmp_path, 
 
 
 def test_an_internal_error_is_one_line_exit_3_and_debug_anywhere_shows_it(rendered, capsys, monkeypatch):
-    from visloc import commands
+    from visloc.commands import markers  # the module `visloc detect` runs from
 
     def broken(args):
         raise ZeroDivisionError("a bug")
 
-    monkeypatch.setattr(commands, "detect", broken)
+    monkeypatch.setattr(markers, "detect", broken)
     img = str(min(rendered.glob("frame_*.png")))
     assert main(["detect", img]) == 3
     err = capsys.readouterr().err.strip()
@@ -258,3 +258,18 @@ def test_a_value_error_once_the_frames_run_is_visloc_s_fault(rendered, capsys, m
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "internal error: ValueError" in err
     assert main(["detect", str(rendered), "--dict", "DICT_NOPE"]) == 2  # before the frames: the input's fault
+
+
+def test_a_sub_command_imports_only_what_it_needs(tmp_path):
+    # `visloc model` and a missing input answer without loading OpenCV, rerun or scipy.spatial
+    # (each takes a large part of a second to import)
+    import subprocess
+    import sys
+
+    probe = ("import sys; from visloc.cli import main; code = main({argv!r}); "
+             "print(code, sorted(m for m in ('cv2', 'rerun', 'scipy.spatial') if m in sys.modules))")
+    for argv, code in ((["model", "--json"], 0), (["detect", str(tmp_path / "none.png")], 2),
+                       (["flow", str(tmp_path), "--camera", str(tmp_path / "none.yml"), "--height", "1"], 2)):
+        out = subprocess.run([sys.executable, "-c", probe.format(argv=argv)], capture_output=True, text=True,
+                             check=True).stdout.strip().splitlines()[-1]
+        assert out == f"{code} []", (argv, out)

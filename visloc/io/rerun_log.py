@@ -32,12 +32,18 @@ from typing import Any
 
 import cv2
 import numpy as np
-import rerun as rr
 from numpy.typing import NDArray
 
 from visloc.images import check_image
 from visloc.io.closing import Closing, commit_staged, staged_path
 from visloc.types import MarkerDetection
+
+
+def _rerun():
+    """The rerun SDK, imported on first use (it takes about half a second to import)."""
+    import rerun
+
+    return rerun
 
 __all__ = ["RerunLogger"]
 
@@ -104,9 +110,9 @@ class RerunLogger(Closing):
             raise ValueError(f"path is a directory, expected an .rrd file path: {self.path}")
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.jpeg_quality = jpeg_quality
-        self.recording = rr.RecordingStream(app_id, recording_id=str(uuid.uuid4()))
+        self.recording = _rerun().RecordingStream(app_id, recording_id=str(uuid.uuid4()))
         self.recording.save(staged_path(self.path))  # renamed over path by close()
-        self.recording.log("/", rr.ViewCoordinates.RDF, static=True)
+        self.recording.log("/", _rerun().ViewCoordinates.RDF, static=True)
         self._pinhole: tuple[bytes, tuple[int, int]] | None = None
         self._marker_paths: set[str] = set()
         self._track: list[list[float]] = []
@@ -188,9 +194,9 @@ class RerunLogger(Closing):
         rec.set_time("frame", sequence=int(index))
         rec.set_time("time", duration=float(time))
         if rgb is None:
-            rec.log("camera/image", rr.Clear(recursive=False))
+            rec.log("camera/image", _rerun().Clear(recursive=False))
         else:
-            img = rr.Image(rgb)
+            img = _rerun().Image(rgb)
             rec.log(
                 "camera/image",
                 img
@@ -204,11 +210,11 @@ class RerunLogger(Closing):
         strips = [np.vstack([c, c[:1]]) + _HALF_PIXEL for c in corners]
         rec.log(
             "camera/image/markers",
-            rr.LineStrips2D(strips, labels=[str(i) for i in ids], class_ids=ids),
+            _rerun().LineStrips2D(strips, labels=[str(i) for i in ids], class_ids=ids),
         )
         rec.log(
             "camera/image/corner0",
-            rr.Points2D([c[0] + _HALF_PIXEL for c in corners], colors=_CORNER0_RGB, radii=-3.0),
+            _rerun().Points2D([c[0] + _HALF_PIXEL for c in corners], colors=_CORNER0_RGB, radii=-3.0),
         )
         self._log_poses(ids, poses, marker_length)
 
@@ -218,7 +224,7 @@ class RerunLogger(Closing):
         rec.set_time("frame", sequence=int(index))
         rec.set_time("time", duration=float(time))
         if image is not None:
-            img = rr.Image(_rgb(image))
+            img = _rerun().Image(_rgb(image))
             rec.log("camera/image",
                     img if self.jpeg_quality is None else img.compress(jpeg_quality=int(self.jpeg_quality)))
         return rec
@@ -243,16 +249,16 @@ class RerunLogger(Closing):
         rec = self._frame(index, time, image)
         if field is not None and len(field.centers):
             good = np.asarray(field.confidence) > 0.2
-            rec.log("camera/image/flow", rr.Arrows2D(origins=field.centers[good] + _HALF_PIXEL,
+            rec.log("camera/image/flow", _rerun().Arrows2D(origins=field.centers[good] + _HALF_PIXEL,
                                                      vectors=field.vectors[good], colors=(0, 200, 255)))
         if velocity is not None:
-            rec.log("plots/vx", rr.Scalars(float(velocity.v[0])))
-            rec.log("plots/vy", rr.Scalars(float(velocity.v[1])))
-            rec.log("plots/yaw_rate", rr.Scalars(float(velocity.yaw_rate)))
-            rec.log("plots/quality", rr.Scalars(float(velocity.quality)))
+            rec.log("plots/vx", _rerun().Scalars(float(velocity.v[0])))
+            rec.log("plots/vy", _rerun().Scalars(float(velocity.v[1])))
+            rec.log("plots/yaw_rate", _rerun().Scalars(float(velocity.yaw_rate)))
+            rec.log("plots/quality", _rerun().Scalars(float(velocity.quality)))
         if position is not None:
             self._track.append([float(position[0]), float(position[1])])
-            rec.log("track/position", rr.LineStrips2D([self._track]))
+            rec.log("track/position", _rerun().LineStrips2D([self._track]))
 
     def log_localize(self, index: int, time: float, image: NDArray[np.uint8] | None,
                      estimate: Sequence[float], truth: Sequence[float] | None = None) -> None:
@@ -264,10 +270,10 @@ class RerunLogger(Closing):
             if p is None:
                 continue
             for axis, v in zip("xyz", p, strict=False):
-                rec.log(f"plots/{axis}/{name}", rr.Scalars(float(v)))
+                rec.log(f"plots/{axis}/{name}", _rerun().Scalars(float(v)))
             track = self._tracks3d.setdefault(name, [])
             track.append([float(v) for v in p])
-            rec.log(f"world/{name}", rr.LineStrips3D([track]))
+            rec.log(f"world/{name}", _rerun().LineStrips3D([track]))
 
     @staticmethod
     def _corners(det: MarkerDetection, i: int) -> NDArray[np.float64]:
@@ -290,7 +296,7 @@ class RerunLogger(Closing):
     def _log_pinhole(self, K: NDArray[np.float64], size: tuple[int, int]) -> None:
         key = (K.tobytes(), size)
         if key != self._pinhole:
-            self.recording.log("camera", rr.Pinhole(image_from_camera=K, resolution=list(size)))
+            self.recording.log("camera", _rerun().Pinhole(image_from_camera=K, resolution=list(size)))
             self._pinhole = key
 
     def _log_poses(
@@ -314,10 +320,10 @@ class RerunLogger(Closing):
                     k += 1
                     path = f"world/markers/{marker_id}_{k}"
                 logged.add(path)
-                rec.log(path, rr.Transform3D(translation=t, mat3x3=R))
+                rec.log(path, _rerun().Transform3D(translation=t, mat3x3=R))
                 rec.log(
                     path,
-                    rr.Boxes3D(
+                    _rerun().Boxes3D(
                         half_sizes=[[half, half, half / 50]],
                         colors=[_PLATE_RGB],
                         labels=[str(marker_id)],
@@ -325,12 +331,12 @@ class RerunLogger(Closing):
                 )
                 rec.log(
                     f"{path}/axes",
-                    rr.Arrows3D(
+                    _rerun().Arrows3D(
                         origins=np.zeros((3, 3)), vectors=np.eye(3) * half, colors=_AXIS_RGB
                     ),
                 )
         for path in sorted(self._marker_paths - logged):
-            rec.log(path, rr.Clear(recursive=True))
+            rec.log(path, _rerun().Clear(recursive=True))
         self._marker_paths = logged
 
     def close(self) -> None:

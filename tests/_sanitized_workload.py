@@ -38,22 +38,22 @@ images = [rng.integers(0, 256, (h, w), dtype=np.uint8) for h, w in ((17, 23), (4
 images += [np.zeros((60, 80), np.uint8), np.full((60, 80), 255, np.uint8),
            (np.indices((120, 160)).sum(axis=0) % 2 * 255).astype(np.uint8),  # one-pixel checkerboard
            np.kron((np.indices((12, 16)).sum(axis=0) % 2), np.ones((10, 10))).astype(np.uint8) * 255]
-for k in range(4):
-    images.append(random_scene(np.random.default_rng(k), size=(320, 240), difficulty=("easy", "hard", "small", "dark")[k]).image)
+for k in range(2):
+    images.append(random_scene(np.random.default_rng(k), size=(320, 240), difficulty=("easy", "dark")[k]).image)
 for det in (MarkerDetector("DICT_4X4_50", native=True), MarkerDetector("DICT_APRILTAG_36h11", inverted="both"),
             MarkerDetector("DICT_4X4_50", border_bits=2, erode=2)):
     for img in images:
         det.detect(img)
 gray = images[-1]
 h, w = gray.shape
-for _ in range(60):  # quads anywhere: inside, across the border, tiny, thin
+for _ in range(30):  # quads anywhere: inside, across the border, tiny, thin
     c = rng.uniform(-20, max(h, w) + 20, 2)
     s = rng.uniform(0.5, 150)
     a = rng.uniform(0, 2 * np.pi)
     sq = c + s * np.array([[np.cos(a + t), np.sin(a + t)] for t in np.arange(4) * np.pi / 2]) * rng.uniform(0.2, 1.0, (4, 1))
     refine_quads(gray, sq[None], radius=int(rng.integers(1, 12)), response="srgb", bend=bool(rng.integers(2)))
 cam = Camera(default_camera((320, 240)))
-for _ in range(40):
+for _ in range(20):
     c = rng.uniform(20, 300, 2)
     s = rng.uniform(2, 200)
     sq = c + s * np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * rng.uniform(0.05, 1.0, (4, 1))
@@ -65,7 +65,7 @@ a = images[-4]
 for motion in (GlobalMotion(np.array([1e4, -1e4]), 0.0, 1.0, None, 0.0, 10, "similarity"),
                GlobalMotion(np.zeros(2), 3.0, 50.0, None, 0.0, 10, "similarity"),
                GlobalMotion(np.array([0.3, -0.2]), 0.01, 1.0, None, 0.0, 10, "similarity")):
-    for stride in (1, 2, 7):
+    for stride in (2, 7):
         D.refine_motion(a, np.roll(a, 3, axis=1), motion, stride=stride, prior=motion)
 f = block_flow(a, np.roll(a, 2, axis=0))
 global_motion(f)

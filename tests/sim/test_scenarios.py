@@ -53,20 +53,20 @@ def test_spread_motors_need_the_integrators_warm():
     assert cold.metrics["position_rms_m"] > 0.1  # the spread drifts it until the integrators act
     warm = simulate("hover", sigma=2.0, seed=3)  # default warm-up hover before t = 0
     assert warm.metrics["position_rms_m"] < 0.01 and warm.status is SimStatus.SETTLED
-    for seed in range(2):
+    for seed in range(1):  # (bench/sim.py flies eight draws)
         step = simulate("sidestep", sigma=2.0, seed=seed)
         assert step.status is SimStatus.SETTLED
         assert step.metrics["settling_time_s"] <= 3.0 and step.metrics["overshoot_pct"] <= 20.0
 
 
 def test_hover_vision_on_visloc_estimates():
-    r = simulate("hover-vision", seed=1, seconds=10.0)  # 10 of the scenario's 30 s: the test's time
+    r = simulate("hover-vision", seed=1, seconds=6.0)  # 6 of the scenario's 30 s: the test's time
     m = r.metrics
     assert r.status is not SimStatus.CRASHED and r.status is not SimStatus.DIVERGED
-    assert len(r.t) == 2001 and r.t[-1] == pytest.approx(10.0)
+    assert len(r.t) == 1201 and r.t[-1] == pytest.approx(6.0)
     assert m["position_rms_m"] <= 0.05
     assert m["estimate_rms_m"] < 0.01
-    assert m["camera_frames"] == 301 and m["vision_fixes"] >= 0.95 * m["camera_frames"]
+    assert m["camera_frames"] == 181 and m["vision_fixes"] >= 0.95 * m["camera_frames"]
     # the controller flew on the estimate, which differs from the truth
     assert np.max(np.abs(r.estimate[:, :3] - r.state[:, :3])) > 1e-4
 

@@ -352,8 +352,9 @@ def _refine_by_squares(gray: NDArray[np.uint8], board: CharucoBoard, found: dict
     each black square next to a found marker is predicted by those markers' homographies and
     refined by the marker detector's stages 8 and 8b (:func:`visloc.markers.refine.refine_quads`:
     its four edges fitted to the light across them, curved under lens distortion, the corners
-    where they meet), with profiles half as wide as the white margin between the square and
-    the markers beside it. Squares not wholly inside the image are left out."""
+    where they meet; each side read by its own black and white levels along it: the light
+    varies across a square of 100 px), with profiles half as wide as the white margin between
+    the square and the markers beside it. Squares not wholly inside the image are left out."""
     plane, corner_ids, near = board.black_squares
     H, have = _marker_homographies(board, found)
     predicted, ok = _mean_prediction(H, have, _padded(near), plane)  # the markers' predictions, averaged
@@ -371,7 +372,7 @@ def _refine_by_squares(gray: NDArray[np.uint8], board: CharucoBoard, found: dict
         lo = radius[:, None] + 2.0  # every profile inside the image: squares cut by its edge are left out
         inside = ((quads_arr[..., 0] >= lo) & (quads_arr[..., 0] <= w - 1 - lo) & (quads_arr[..., 1] >= lo)
                   & (quads_arr[..., 1] <= h - 1 - lo)).all(axis=1)
-        refined, ok = refine_quads(gray, quads_arr, radius=radius, response=response, bend=True)
+        refined, ok = refine_quads(gray, quads_arr, radius=radius, response=response, bend=True, levels="side")
         ok &= inside
         for k in np.flatnonzero(ok).tolist():
             for i, cid in enumerate(corner_ids[rows[k]].tolist()):

@@ -3,7 +3,8 @@
  * The algorithm of visloc.markers.refine.refine_quads, one quad after another: grey levels
  * along `count` normals across each side (offsets -r .. r px), black and white levels as the
  * medians of the innermost and outermost samples (quads with a side of BEND_MIN_SIDE px or
- * more: each side's own, where the light varies significantly: side_levels), the edge on each profile from the area of
+ * more: each side's own, where the light varies significantly, or always with `force`:
+ * side_levels), the edge on each profile from the area of
  * the normalised step (e = r + 1/2 - sum v), profiles without a clean step dropped, weighted
  * total-least-squares lines (outliers of the last pass's first fit dropped), corners at their
  * intersections; `iterations` passes, each centred on the previous pass's lines. See
@@ -133,7 +134,7 @@ static double noise_of(const double *v, int64_t n, double *sorted) {
     return k ? 1.4826 / sqrt(2.0) * select_rank(sorted, k, k / 2) : 0.0;
 }
 
-/* One side's level (black from the innermost samples `ends` of its n profiles, or white from
+/* (force: the line whatever the difference.) One side's level (black from the innermost samples `ends` of its n profiles, or white from
  * the outermost) at each profile, into out[n]: the line along the side through the medians of
  * its first and second half (each at its half's middle) where their difference is significant
  * (over LEVEL_Z standard errors of a difference of medians, from the quad's spread `sd`: the
@@ -141,13 +142,13 @@ static double noise_of(const double *v, int64_t n, double *sorted) {
  * significantly from the quad's level `quad`, else `quad` (with few or noisy samples the
  * quad's level is the better estimate). `sorted` is n doubles of scratch. */
 #define LEVEL_Z 3.0
-static void side_levels(const double *ends, int64_t n, double quad, double sd, double *sorted, double *out) {
+static void side_levels(const double *ends, int64_t n, double quad, double sd, int force, double *sorted, double *out) {
     int64_t h1 = n / 2, h2 = n - h1;
     double level = quad;
     if (h1 >= 2) {
         double c1 = 0.5 * (double)(h1 - 1), c2 = (double)h1 + 0.5 * (double)(h2 - 1);
         double m1 = median_of(ends, h1, sorted), m2 = median_of(ends + h1, h2, sorted);
-        if (fabs(m2 - m1) > LEVEL_Z * 1.2533 * sd * sqrt(2.0 / (double)h1)) {
+        if (force || fabs(m2 - m1) > LEVEL_Z * 1.2533 * sd * sqrt(2.0 / (double)h1)) {
             for (int64_t m = 0; m < n; m++) out[m] = m1 + (m2 - m1) * ((double)m - c1) / (c2 - c1);
             return;
         }
@@ -248,7 +249,7 @@ static double longest_side(const double q[8]) {
     }
     return best;
 }
-static void bend_one(const image *im, double q[8], int64_t r, double *work) {
+static void bend_one(const image *im, double q[8], int64_t r, int force, double *work) {
     const int64_t width = 2 * r + 1, n = BEND_COUNT, n4 = 4 * BEND_COUNT;
     double *p_in = work, *p_out = work + n4, *sorted = work + 2 * n4, *off = work + 3 * n4, *w = work + 4 * n4;
     double *prof = work + 5 * n4;
@@ -277,8 +278,8 @@ static void bend_one(const image *im, double q[8], int64_t r, double *work) {
     double cf[4][3], out[8];
     for (int s = 0; s < 4; s++) {
         double *lo = levels, *hi = levels + n; /* levels as refine_one reads those of large quads */
-        side_levels(p_in + s * n, n, lo_q, sd_lo, sorted, lo);
-        side_levels(p_out + s * n, n, hi_q, sd_hi, sorted, hi);
+        side_levels(p_in + s * n, n, lo_q, sd_lo, force, sorted, lo);
+        side_levels(p_out + s * n, n, hi_q, sd_hi, force, sorted, hi);
         for (int64_t m = 0; m < n; m++) {
             int64_t j = s * n + m;
             double span = hi[m] - lo[m] > 1e-6 ? hi[m] - lo[m] : 1e-6;
@@ -308,7 +309,7 @@ static void bend_one(const image *im, double q[8], int64_t r, double *work) {
 
 /* Refine one quad q (4, 2) in place; 1 on success (q is left as given otherwise). `work`
  * holds 4 * count * (7 + 2 r + 1) doubles. */
-static int refine_one(const image *im, double q[8], int64_t r, int iterations, int64_t count, double end_gap,
+static int refine_one(const image *im, double q[8], int64_t r, int iterations, int64_t count, double end_gap, int force,
                       double *work) {
     const int64_t width = 2 * r + 1, n4 = 4 * count;
     double *p_in = work, *p_out = work + n4, *sorted = work + 2 * n4, *ex = work + 3 * n4, *ey = work + 4 * n4;
@@ -350,8 +351,8 @@ static int refine_one(const image *im, double q[8], int64_t r, int iterations, i
             double *px = ex + s * count, *py = ey + s * count, *w = wt + s * count;
             double *lo_s = res, *hi_s = res + count; /* levels profile by profile */
             if (long_sides) { /* large quads: the light along each side where it varies significantly */
-                side_levels(p_in + s * count, count, lo, sd_lo, sorted, lo_s);
-                side_levels(p_out + s * count, count, hi, sd_hi, sorted, hi_s);
+                side_levels(p_in + s * count, count, lo, sd_lo, force, sorted, lo_s);
+                side_levels(p_out + s * count, count, hi, sd_hi, force, sorted, hi_s);
             } else { /* small ones: the whole quad's (fewer samples per side: noisier) */
                 for (int64_t m = 0; m < count; m++) {
                     lo_s[m] = lo;
@@ -405,10 +406,10 @@ static PyObject *refine_quads(PyObject *self, PyObject *args) {
     (void)self;
     Py_buffer gray, quads, radii, lut;
     Py_ssize_t h, w, count;
-    int iterations, bend;
+    int iterations, bend, force;
     double end_gap;
-    if (!PyArg_ParseTuple(args, "y*nny*y*indy*p", &gray, &h, &w, &quads, &radii, &iterations, &count, &end_gap,
-                          &lut, &bend))
+    if (!PyArg_ParseTuple(args, "y*nny*y*indy*pp", &gray, &h, &w, &quads, &radii, &iterations, &count, &end_gap,
+                          &lut, &bend, &force))
         return NULL;
     Py_ssize_t k = quads.len / (8 * (Py_ssize_t)sizeof(double));
     const char *bad = NULL;
@@ -446,8 +447,9 @@ static PyObject *refine_quads(PyObject *self, PyObject *args) {
             image im = {(const uint8_t *)gray.buf, h, w, (const double *)lut.buf};
             Py_BEGIN_ALLOW_THREADS
             for (Py_ssize_t i = 0; i < k; i++) {
-                flag[i] = (uint8_t)refine_one(&im, c + 8 * i, rad[i], iterations, count, end_gap, work);
-                if (flag[i] && bend && longest_side(c + 8 * i) >= BEND_MIN_SIDE) bend_one(&im, c + 8 * i, rad[i], work);
+                flag[i] = (uint8_t)refine_one(&im, c + 8 * i, rad[i], iterations, count, end_gap, force, work);
+                if (flag[i] && bend && longest_side(c + 8 * i) >= BEND_MIN_SIDE)
+                    bend_one(&im, c + 8 * i, rad[i], force, work);
             }
             Py_END_ALLOW_THREADS
             result = Py_BuildValue("(OO)", corners, ok);

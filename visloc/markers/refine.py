@@ -142,7 +142,8 @@ def edge_offsets(profiles: NDArray, black: NDArray | float, white: NDArray | flo
     return radius + 0.5 - v.sum(axis=-1)
 
 
-def _step_offsets(prof: NDArray, r: NDArray, big: int, long_sides: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+def _step_offsets(prof: NDArray, r: NDArray, big: int, long_sides: NDArray,
+                  force: bool = False) -> tuple[NDArray, NDArray, NDArray, NDArray]:
     """The edge on each profile (K, 4, M, 2 big + 1) of quads with profile half-widths ``r``
     (K,), from the area of the normalised step (module docstring), as offsets (K, 4, M) from
     the profile centres; which profiles crossed a clean step (occlusion or a neighbouring
@@ -161,8 +162,8 @@ def _step_offsets(prof: NDArray, r: NDArray, big: int, long_sides: NDArray) -> t
     lo = np.partition(p_in.reshape(k, -1), half, axis=1)[:, half]
     hi = np.partition(p_out.reshape(k, -1), half, axis=1)[:, half]
     along = long_sides[:, None, None]
-    lo_s = np.where(along, _side_levels(p_in, lo), lo[:, None, None])  # (K, 4, M)
-    hi_s = np.where(along, _side_levels(p_out, hi), hi[:, None, None])
+    lo_s = np.where(along, _side_levels(p_in, lo, force), lo[:, None, None])  # (K, 4, M)
+    hi_s = np.where(along, _side_levels(p_out, hi, force), hi[:, None, None])
     prof -= lo_s[..., None]  # (I - black) / (white - black), clipped to [0, 1]
     prof /= np.maximum(hi_s - lo_s, 1e-6)[..., None]
     np.clip(prof, 0.0, 1.0, out=prof)
@@ -178,14 +179,15 @@ def _longest_sides(q: NDArray) -> NDArray:
     return np.sqrt(((q[:, _NEXT] - q) ** 2).sum(axis=-1)).max(axis=1)
 
 
-def _side_levels(ends: NDArray, quad: NDArray) -> NDArray:
+def _side_levels(ends: NDArray, quad: NDArray, force: bool = False) -> NDArray:
     """Each side's level (black from the innermost samples, white from the outermost) at each
     of its M profiles (K, 4, M), from the end samples ``ends`` (K, 4, M) and the quad's level
     ``quad`` (K,): the line along the side through the medians (upper middle) of its first and
     second half, each at its half's middle, where their difference is significant (over
     :data:`_LEVEL_Z` standard errors of a difference of medians, from the quad's noise:
     the light varies along the side), else the side's median where it differs significantly
-    from the quad's level, else the quad's level (as ``_refine.c``)."""
+    from the quad's level, else the quad's level (as ``_refine.c``); with ``force`` the line
+    always."""
     k, _, m = ends.shape
     out = np.broadcast_to(quad[:, None, None], ends.shape).copy()
     h1, h2 = m // 2, m - m // 2
@@ -199,7 +201,7 @@ def _side_levels(ends: NDArray, quad: NDArray) -> NDArray:
     m2 = np.partition(ends[..., h1:], h2 // 2, axis=-1)[..., h2 // 2]
     side = np.partition(ends, m // 2, axis=-1)[..., m // 2]
     c1, c2 = 0.5 * (h1 - 1), h1 + 0.5 * (h2 - 1)
-    sloped = np.abs(m2 - m1) > _LEVEL_Z * 1.2533 * sd[:, None] * np.sqrt(2.0 / h1)
+    sloped = (np.abs(m2 - m1) > _LEVEL_Z * 1.2533 * sd[:, None] * np.sqrt(2.0 / h1)) | force
     shifted = ~sloped & (np.abs(side - quad[:, None]) > _LEVEL_Z * 1.2533 * sd[:, None] / np.sqrt(m))
     line = m1[..., None] + (m2 - m1)[..., None] * ((np.arange(m) - c1) / (c2 - c1))
     out[sloped] = line[sloped]
@@ -216,6 +218,7 @@ def refine_quads(
     count: int = 24,
     response: str | float | NDArray = "srgb",
     bend: bool = False,
+    levels: str = "auto",
     native: bool | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """Refine the corners of dark squares on a bright surround to sub-pixel accuracy.
@@ -242,6 +245,11 @@ def refine_quads(
         Stage 8b on the refined quads with a side of 40 px or more: the corners where the
         sides, fitted as quadratic curves, meet (:func:`bend_corners`, compiled alongside
         stage 8).
+    levels : {"auto", "side"}
+        The black and white levels of a quad with a side of 40 px or more: ``"auto"`` each
+        side's own where the light varies significantly along or across it, else the quad's;
+        ``"side"`` each side's own always (large squares with no marker inside, such as a
+        ChArUco board's, where the sides' end samples are clean).
     native : bool or None
         Run the compiled version (``True``) or the numpy one (``False``); ``None``: the
         compiled one when it was built (:data:`NATIVE_REFINE`).
@@ -277,11 +285,13 @@ def refine_quads(
         raise ValueError("quads: every corner must be finite")
     if count < 2 or iterations < 1:
         raise ValueError(f"count must be >= 2 and iterations >= 1, got {count} and {iterations}")
+    if levels not in ("auto", "side"):
+        raise ValueError(f"levels must be 'auto' or 'side', got {levels!r}")
     if use_compiled(native, _refine, "visloc.markers._refine"):
         g = np.ascontiguousarray(gray)
         raw, raw_ok = _refine.refine_quads(g, g.shape[0], g.shape[1], np.ascontiguousarray(q0),
                                            np.ascontiguousarray(r, np.int64), int(iterations), int(count), _END_GAP,
-                                           lut, bool(bend))
+                                           lut, bool(bend), levels == "side")
         return np.frombuffer(raw, np.float64).reshape(k, 4, 2).copy(), np.frombuffer(raw_ok, np.uint8).astype(bool)
     light = _to_light(gray, response)
     big = int(r.max())
@@ -289,7 +299,7 @@ def refine_quads(
     ok_all = np.ones(k, bool)
     for it in range(iterations):
         base, normals, prof = sample_edge_profiles(light, q, big, count=count, end_gap=_END_GAP)
-        e, good, lo, hi = _step_offsets(prof, r, big, _longest_sides(q) >= _BEND_MIN_SIDE)
+        e, good, lo, hi = _step_offsets(prof, r, big, _longest_sides(q) >= _BEND_MIN_SIDE, levels == "side")
         pts = (base + e[..., None] * normals[:, :, None, :]).reshape(k * 4, count, 2)
         w = good.reshape(k * 4, count).astype(np.float64)
         lines = fit_lines(pts, w)
@@ -311,7 +321,7 @@ def refine_quads(
     long_side = _longest_sides(q) >= _BEND_MIN_SIDE
     if bend and (ok_all & long_side).any():  # short sides bend by a small fraction of a pixel
         pick = ok_all & long_side
-        q[pick] = bend_corners(gray, q[pick], radius=r[pick], response=response)
+        q[pick] = bend_corners(gray, q[pick], radius=r[pick], response=response, levels=levels)
     return q, ok_all
 
 
@@ -323,6 +333,7 @@ def bend_corners(
     count: int = 40,
     end_gap: float = 0.08,
     response: str | float | NDArray = "srgb",
+    levels: str = "auto",
 ) -> NDArray[np.float64]:
     """Stage 8b: corners where the marker's sides are curves, not lines.
 
@@ -349,6 +360,8 @@ def bend_corners(
         Fraction of each side left out at both ends.
     response : {"srgb", "linear"}, float or ndarray (256,)
         As in :func:`refine_quads`.
+    levels : {"auto", "side"}
+        As in :func:`refine_quads`.
 
     Returns
     -------
@@ -373,7 +386,7 @@ def bend_corners(
     x1, y1 = np.minimum((np.ceil(q.reshape(-1, 2).max(axis=0)) + big + 3).astype(int), [w_img, h])
     light = _to_light(gray[y0:y1, x0:x1], response)
     _, normals, prof = sample_edge_profiles(light, q - [x0, y0], big, count=count, end_gap=end_gap)
-    e, good, _, _ = _step_offsets(prof, r, big, np.ones(len(prof), bool))  # offsets from the sides, px
+    e, good, _, _ = _step_offsets(prof, r, big, np.ones(len(prof), bool), levels == "side")  # offsets, px
     w = good.astype(np.float64)
     t = np.linspace(end_gap, 1 - end_gap, count)
     basis = np.stack([np.ones(count), t, t * t], axis=-1)  # (M, 3)

@@ -199,6 +199,8 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
                     help="views with fewer board corners are left out (default 6, at least 6)")
     cb.add_argument("--response", type=_response, default="srgb", metavar="srgb|linear|GAMMA", help=_RESPONSE_HELP)
     cb.add_argument("--max-frames", type=_count, metavar="N", help="stop after N frames")
+    cb.add_argument("--coverage", metavar="FILE.png",
+                    help="write a picture of where the corners fell and their residuals (arrows x50)")
     cb.add_argument("--json", action="store_true", help="print the result as JSON")
     cb.add_argument("--quiet", action="store_true", help="no progress bar or summary")
 
@@ -325,7 +327,7 @@ _COMMANDS = {"detect": ("markers", "detect"), "render": ("markers", "render"), "
 
 #: options naming files or folders a command reads, and those it writes
 _INPUTS = ("source", "camera", "map", "height_csv", "imu", "truth", "dict", "body", "reference", "board")
-_OUTPUTS = ("out", "annotate", "rerun", "explain", "plot", "outdir", "output")
+_OUTPUTS = ("out", "annotate", "rerun", "explain", "plot", "outdir", "output", "coverage")
 
 
 def _inputs(args: argparse.Namespace) -> tuple[list[Path], list[Path]]:

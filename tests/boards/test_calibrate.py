@@ -25,8 +25,10 @@ def views(tmp_path_factory):
 
 def test_calibrate_recovers_the_rendered_camera(views, tmp_path, capsys):
     _, board, out = views
-    cam = tmp_path / "camera.yml"
-    assert main(["calibrate", str(out), "--board", str(board), "--out", str(cam), "--json"]) == 0
+    cam, cover = tmp_path / "camera.yml", tmp_path / "coverage.png"
+    assert main(["calibrate", str(out), "--board", str(board), "--out", str(cam), "--json", "--coverage",
+                 str(cover)]) == 0
+    assert cv2.imread(str(cover)).shape == (600, 800, 3)
     summary = json.loads(capsys.readouterr().out)
     got, truth = Camera.from_file(cam), Camera.from_file(out / "camera_truth.yml")
     np.testing.assert_allclose(got.K, truth.K, atol=2.0)  # px, of focal lengths near 600 px

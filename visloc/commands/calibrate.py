@@ -73,6 +73,8 @@ def calibrate_camera(args: argparse.Namespace) -> int:
                 continue
             views.append(found)
             names.append(frame.name)
+    if args.coverage and not cv2.haveImageWriter(args.coverage):
+        raise UsageError(f"cannot write {args.coverage}: the name must end in an image extension (e.g. .png)")
     if len(views) < 3:
         raise UsageError(f"calibration needs at least 3 views showing the board with {args.min_corners} or more "
                          f"corners; {len(views)} found in {args.source}")
@@ -83,12 +85,45 @@ def calibrate_camera(args: argparse.Namespace) -> int:
     staged = staged_path(Path(args.out))
     cal.to_file(staged)
     commit_staged(staged, Path(args.out), keep=True)
+    if args.coverage:
+        _write_coverage(Path(args.coverage), cal, views, board)
     advice = _advice(cal, views, size)
     if args.json:
         print(json.dumps(_summary(cal, names) | {"advice": advice}, indent=1))
     elif not args.quiet:
         _print_summary(cal, names, advice, args.out)
     return 1 if failed else 0
+
+
+#: residual arrows are drawn this many times their length
+ARROW_SCALE = 50.0
+
+
+def _write_coverage(path: Path, cal, views, board: CharucoBoard) -> None:
+    """The coverage picture: the image's GRID x GRID cells, every used view's corners (one
+    colour per view) and each corner's reprojection residual as an arrow ARROW_SCALE times its
+    length (the calibration's own poses)."""
+    w, h = cal.size
+    img = np.full((h, w, 3), 255, np.uint8)
+    for k in range(1, GRID):
+        cv2.line(img, (k * w // GRID, 0), (k * w // GRID, h - 1), (200, 200, 200), 1)
+        cv2.line(img, (0, k * h // GRID), (w - 1, k * h // GRID), (200, 200, 200), 1)
+    for n, i in enumerate(cal.views):
+        v = views[i]
+        colour = tuple(int(c) for c in cv2.applyColorMap(np.uint8([[n * 255 // max(len(cal.views) - 1, 1)]]),
+                                                           cv2.COLORMAP_TURBO)[0, 0])
+        proj = cv2.projectPoints(board.chessboard_corners[v.ids], cal.rvecs[n], cal.tvecs[n], cal.K, cal.dist)[0]
+        starts = np.rint(v.corners).astype(int)
+        ends = np.rint(v.corners + ARROW_SCALE * (proj.reshape(-1, 2) - v.corners)).astype(int)
+        for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
+            cv2.circle(img, tuple(a), 3, colour, -1)
+            cv2.arrowedLine(img, tuple(a), tuple(b), (0, 0, 0), 1, tipLength=0.3)
+    cv2.putText(img, f"{len(cal.views)} views, RMS {cal.rms:.3f} px; arrows x{ARROW_SCALE:g}", (10, 24),
+                cv2.FONT_HERSHEY_SIMPLEX, 0.7, (0, 0, 0), 2)
+    staged = staged_path(path)
+    if not cv2.imwrite(str(staged), img):
+        raise UsageError(f"cannot write {path}")
+    commit_staged(staged, path, keep=True)
 
 
 def _summary(cal, names: list[str]) -> dict:

@@ -20,7 +20,8 @@ same way (visloc's ``ground_velocity``), so the comparison is of the image motio
 Two more 320x240 sets pass the same flights through a camera (``FLOW_CAMERA``: optics blur, shot
 and read noise, vignetting, the sRGB curve, 8-bit quantisation), the second with every other
 frame exposed 20 % more (auto exposure stepping); a third is slow flight (under 0.3 m/s at
-1.5-2.5 m: the image moves less than a pixel per frame, the hover regime). Timing is interleaved per pair (each method in
+1.5-2.5 m: the image moves less than a pixel per frame, the hover regime); a fourth adds a moving
+shadow (a soft band of 40 % less light drifting 0.5 px per frame over the ground). Timing is interleaved per pair (each method in
 turn, several rounds) and covers image motion plus velocity. Usage: ``python bench/flow.py [--quick] [--rounds 3]``; writes
 ``bench/results/flow.json`` and ``flow.md``.
 """
@@ -122,20 +123,37 @@ FLOW_CAMERA = CameraEffects(blur_sigma=0.7, full_well=5000.0, read_noise=1.0, vi
                             jpeg_quality=None)
 
 
-def _frames(fl, camera, exposure_step, seed):
+#: the moving-shadow set: a band of 40 % less light, a third of the image wide with soft edges,
+#: drifting across the ground at 0.5 px per frame (a cloud's or a structure's shadow)
+SHADOW_DEPTH, SHADOW_SPEED = 0.4, 0.5
+
+
+def _shadow(shape, k):
+    """The light (H, W) of frame ``k`` under the moving shadow: 1 outside the band."""
+    h, w = shape
+    x = np.arange(w) - (0.2 * w + SHADOW_SPEED * k)
+    y = np.arange(h)[:, None]
+    d = x[None, :] + 0.3 * (y - h / 2)  # a slanted band
+    inside = 0.5 * (np.tanh(d / 6.0) - np.tanh((d - w / 3.0) / 6.0))
+    return 1.0 - SHADOW_DEPTH * inside
+
+
+def _frames(fl, camera, exposure_step, seed, shadow=False):
     """The flight's frames as rendered (linear, with its noise), or through ``camera``; with
-    ``exposure_step`` every other frame is exposed 20 % more (auto exposure stepping)."""
+    ``exposure_step`` every other frame is exposed 20 % more (auto exposure stepping); with
+    ``shadow`` a moving shadow darkens a band of the ground (:func:`_shadow`)."""
     if camera is None:
         return list(fl.frames)
     rng = np.random.default_rng(seed)
     out = []
     for k, f in enumerate(fl.frames):
         fx = replace(camera, exposure=1.2) if exposure_step and k % 2 else camera
-        out.append(apply_camera(f.astype(np.float64), fl.K, fx, rng=rng)[0])
+        light = f.astype(np.float64) * (_shadow(f.shape, k) if shadow else 1.0)
+        out.append(apply_camera(light, fl.K, fx, rng=rng)[0])
     return out
 
 
-def run(size, n_flights, seconds, rounds, seed0, camera=None, exposure_step=False, slow=False):
+def run(size, n_flights, seconds, rounds, seed0, camera=None, exposure_step=False, slow=False, shadow=False):
     methods = make_methods(size)
     pairs = []
     for i in range(n_flights):
@@ -145,7 +163,7 @@ def run(size, n_flights, seconds, rounds, seed0, camera=None, exposure_step=Fals
                            texture=("grass", "gravel", "brick")[i % 3])
         cam = Camera(fl.K, size=size)
         tr = fl.track
-        frames = _frames(fl, camera, exposure_step, seed0 + i)
+        frames = _frames(fl, camera, exposure_step, seed0 + i, shadow)
         for k in range(1, len(tr)):
             pairs.append((frames[k - 1], frames[k], cam, float(tr.position[k - 1, 2]),
                           tr.pair_v[k], float(tr.pair_yaw_rate[k])))
@@ -221,14 +239,17 @@ def main(argv=None) -> int:
     n_flights, seconds = (2, 0.5) if args.quick else (6, 2.0)
     result = {"machine": {"python": sys.version.split()[0], "opencv": cv2.__version__, "numpy": np.__version__,
                           "platform": platform.platform()}, "rounds": args.rounds, "sizes": {}}
-    sets = [((320, 240), None, False, False), ((640, 480), None, False, False), ((320, 240), FLOW_CAMERA, False, False),
-            ((320, 240), FLOW_CAMERA, True, False), ((320, 240), FLOW_CAMERA, False, True)]
-    for size, camera, step, slow in sets:
+    sets = [((320, 240), None, False, False, False), ((640, 480), None, False, False, False),
+            ((320, 240), FLOW_CAMERA, False, False, False), ((320, 240), FLOW_CAMERA, True, False, False),
+            ((320, 240), FLOW_CAMERA, False, True, False), ((320, 240), FLOW_CAMERA, False, False, True)]
+    for size, camera, step, slow, shadow in sets:
         key = f"{size[0]}x{size[1]}" + ("" if camera is None else ", camera-like") + (
             ", +20 % exposure every other frame" if step else "") + (
-            ", slow flight (under 0.3 m/s at 1.5-2.5 m: under a pixel per frame)" if slow else "")
+            ", slow flight (under 0.3 m/s at 1.5-2.5 m: under a pixel per frame)" if slow else "") + (
+            f", a moving shadow ({100 * SHADOW_DEPTH:.0f} % less light in a band drifting {SHADOW_SPEED} px per frame)"
+            if shadow else "")
         print(f"flow {key} ...", file=sys.stderr, flush=True)
-        res = run(size, n_flights, seconds, args.rounds, 10, camera, step, slow)
+        res = run(size, n_flights, seconds, args.rounds, 10, camera, step, slow, shadow)
         res["still"] = still_frames(size)
         result["sizes"][key] = res
     write_results(args.out, "flow", result, markdown(result))

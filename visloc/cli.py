@@ -369,8 +369,9 @@ def check_inputs(args: argparse.Namespace) -> None:
         if name == "source" and (v.isdigit() or glob.has_magic(v) or "://" in v):
             continue
         if not Path(v).exists():
-            what = "path" if name == "source" else f"--{name.replace('_', '-')}"
-            raise UsageError(f"{what} does not exist: {v}")
+            if name == "source":
+                raise UsageError(f"path does not exist: {v}")
+            raise UsageError(f"{name.replace('_', '-')} file {v} does not exist")
 
 
 def check_outputs(args: argparse.Namespace) -> None:

@@ -330,13 +330,15 @@ _INPUTS = ("source", "camera", "map", "height_csv", "imu", "truth", "dict", "bod
 _OUTPUTS = ("out", "annotate", "rerun", "explain", "plot", "outdir", "output", "coverage")
 
 
+def _input_options(args: argparse.Namespace) -> list[tuple[str, str]]:
+    """(option, value) of every input option given on a parsed command line."""
+    return [(name, v) for name in _INPUTS if isinstance(v := getattr(args, name, None), str) and v]
+
+
 def _inputs(args: argparse.Namespace) -> tuple[list[Path], list[Path]]:
     """The input files and folders of a parsed command line (globs expanded), resolved."""
     files, folders = [], []
-    for name in _INPUTS:
-        v = getattr(args, name, None)
-        if not isinstance(v, str) or not v:
-            continue
+    for name, v in _input_options(args):
         p = Path(v)
         if p.is_dir():
             folders.append(p.resolve())
@@ -362,11 +364,8 @@ def check_inputs(args: argparse.Namespace) -> None:
     UsageError
         Naming the option and the path.
     """
-    for name in _INPUTS:
-        v = getattr(args, name, None)
-        if name == "dict" or not isinstance(v, str) or not v:
-            continue
-        if name == "source" and (v.isdigit() or glob.has_magic(v) or "://" in v):
+    for name, v in _input_options(args):
+        if name == "dict" or name == "source" and (v.isdigit() or glob.has_magic(v) or "://" in v):
             continue
         if not Path(v).exists():
             if name == "source":

@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from visloc.boards.charuco import CharucoBoard, CharucoCorners
+from visloc.pose.camera import Camera
 
 __all__ = ["CALIBRATION_MODELS", "Calibration", "calibrate"]
 
@@ -82,19 +83,11 @@ class Calibration:
         Path
         """
         path = Path(path)
-        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
-        try:
-            fs.write("image_width", int(self.size[0]))
-            fs.write("image_height", int(self.size[1]))
-            fs.write("camera_matrix", np.asarray(self.K, np.float64))
-            fs.write("distortion_coefficients", np.asarray(self.dist, np.float64).reshape(1, -1))
-            fs.write("distortion_model", self.model)
-            fs.write("reprojection_rms_px", float(self.rms))
-            fs.write("per_view_rms_px", np.asarray(self.per_view, np.float64).reshape(1, -1))
-            fs.write("std_fx_fy_cx_cy_dist", np.asarray(self.std, np.float64).reshape(1, -1))
-            fs.write("views_used", len(self.views))
-        finally:
-            fs.release()
+        extra = {"distortion_model": self.model, "reprojection_rms_px": float(self.rms),
+                 "per_view_rms_px": np.asarray(self.per_view, np.float64).reshape(1, -1),
+                 "std_fx_fy_cx_cy_dist": np.asarray(self.std, np.float64).reshape(1, -1),
+                 "views_used": len(self.views)}
+        Camera(self.K, self.dist, size=self.size).to_file(path, extra=extra)
         return path
 
 

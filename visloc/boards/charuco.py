@@ -391,10 +391,11 @@ def _predict(board: CharucoBoard, found: dict[int, FloatArray]) -> tuple[NDArray
     (N,) px."""
     H, have = _marker_homographies(board, found)
     c = board.chessboard_corners[:, :2]
-    pred, ok = _mean_prediction(H, have, _padded(board.adjacent_markers), c[:, None, :])  # (C, 1, 2)
+    near = _padded(board.adjacent_markers)
+    pred, ok = _mean_prediction(H, have, near, c[:, None, :])  # (C, 1, 2)
     s = board.square_length
     square = c[:, None, :] + np.array([[0.0, 0.0], [s, 0.0], [s, s], [0.0, s]])  # (C, 4, 2)
-    sq, _ = _mean_prediction(H, have, _padded(board.adjacent_markers), square)
+    sq, _ = _mean_prediction(H, have, near, square)
     x, y = sq[..., 0], sq[..., 1]
     scale = np.sqrt(np.abs(0.5 * ((x * np.roll(y, -1, axis=1)).sum(1) - (np.roll(x, -1, axis=1) * y).sum(1))))
     ok &= np.isfinite(scale)

@@ -274,9 +274,10 @@ class Camera:
             raise ValueError(f"camera file {str(path)!r}: {key!r} is not an integer")
         return int(node.real())
 
-    def to_file(self, path: str | Path) -> None:
+    def to_file(self, path: str | Path, *, extra: dict | None = None) -> None:
         """Write OpenCV FileStorage YAML (``camera_matrix``, ``distortion_coefficients`` and,
-        when ``size`` is known, ``image_width`` / ``image_height``)."""
+        when ``size`` is known, ``image_width`` / ``image_height``), then the nodes of ``extra``
+        (name -> number, string or array; e.g. a calibration's figures)."""
         path = Path(path)
         fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_FORMAT_YAML)
         if not fs.isOpened():
@@ -287,6 +288,8 @@ class Camera:
                 fs.write("image_height", int(self.size[1]))
             fs.write("camera_matrix", np.ascontiguousarray(self.K))
             fs.write("distortion_coefficients", np.ascontiguousarray(self.dist.reshape(-1, 1)))
+            for key, value in (extra or {}).items():
+                fs.write(key, value)
         finally:
             fs.release()
 

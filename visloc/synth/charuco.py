@@ -132,18 +132,11 @@ def _board_polygons(board: CharucoBoard, dic, centres: FloatArray):
     s = board.square_length
     width, height = board.squares_x * s, board.squares_y * s
     m = 0.5 * s
-
-    def rect(x0: float, x1: float, y0: float, y1: float) -> FloatArray:
-        return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
-
-    outer = rect(-m, width + m, m, -height - m)
+    outer = np.array([[-m, m], [width + m, m], [width + m, -height - m], [-m, -height - m]])
     polys, weights = [outer], [1.0]
-    white = {(int(np.floor(c[1] / -s)), int(np.floor(c[0] / s))) for c in centres}  # (row, col) of markers
-    for r in range(board.squares_y):
-        for c in range(board.squares_x):
-            if (r, c) not in white:
-                polys.append(rect(c * s, (c + 1) * s, -r * s, -(r + 1) * s))
-                weights.append(-1.0)
+    for square in board.black_squares[0]:  # board frame (y down) -> the face's (y up)
+        polys.append(square * (1.0, -1.0))
+        weights.append(-1.0)
     for mid, centre in zip(board.marker_ids.tolist(), centres, strict=True):
         _, tag, tag_w = _plane_polygons(dic.bits[mid], board.marker_length, 0.0)
         polys.extend(p + centre[:2] for p in tag[1:])

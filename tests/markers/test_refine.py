@@ -161,7 +161,7 @@ def test_the_compiled_stage_checks_its_own_arguments_and_far_corners_read_the_bo
 
 
 @pytest.mark.parametrize("native", ENGINES)
-def test_each_side_of_a_large_square_reads_its_own_light(native):
+def test_a_large_square_under_a_light_gradient_keeps_its_corners(native):
     # a 70 px square under a light gradient (25 % across the image, as vignetting): the corners
     # stay within 0.05 px (about 0.015 px without the gradient)
     truth = np.array([[20.3, 15.6], [90.1, 16.2], [89.4, 85.7], [19.8, 84.9]])

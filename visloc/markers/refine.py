@@ -161,9 +161,11 @@ def _step_offsets(prof: NDArray, r: NDArray, big: int, long_sides: NDArray,
     p_out = prof[kk, :, :, big + r]
     lo = np.partition(p_in.reshape(k, -1), half, axis=1)[:, half]
     hi = np.partition(p_out.reshape(k, -1), half, axis=1)[:, half]
-    along = long_sides[:, None, None]
-    lo_s = np.where(along, _side_levels(p_in, lo, force), lo[:, None, None])  # (K, 4, M)
-    hi_s = np.where(along, _side_levels(p_out, hi, force), hi[:, None, None])
+    lo_s = np.broadcast_to(lo[:, None, None], p_in.shape).copy()  # (K, 4, M): the quad's levels,
+    hi_s = np.broadcast_to(hi[:, None, None], p_out.shape).copy()
+    if long_sides.any():  # each side's own on the large quads
+        lo_s[long_sides] = _side_levels(p_in[long_sides], lo[long_sides], force)
+        hi_s[long_sides] = _side_levels(p_out[long_sides], hi[long_sides], force)
     prof -= lo_s[..., None]  # (I - black) / (white - black), clipped to [0, 1]
     prof /= np.maximum(hi_s - lo_s, 1e-6)[..., None]
     np.clip(prof, 0.0, 1.0, out=prof)

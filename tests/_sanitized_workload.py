@@ -17,6 +17,7 @@ def load(name):
 
 
 import visloc.flow.direct as D
+import visloc.markers.binarize as T
 import visloc.markers.bits as B
 import visloc.markers.contours as C
 import visloc.markers.corners_batch as Q
@@ -24,7 +25,7 @@ import visloc.markers.refine as R
 import visloc.pose.gauss_newton as G
 
 C._borders, C._filter, Q._quads, R._refine = load("_borders"), load("_filter"), load("_quads"), load("_refine")
-B._cells, G._lm, D._direct = load("_cells"), load("_lm"), load("_direct")
+B._cells, G._lm, D._direct, T._threshold = load("_cells"), load("_lm"), load("_direct"), load("_threshold")
 
 from visloc.flow import block_flow, global_motion
 from visloc.markers import MarkerDetector

@@ -29,14 +29,14 @@ def test_every_stage_was_compiled_where_a_compiler_is():
     """With a compiler at install the C code must have been built: a broken build would
     otherwise fall back silently and only the bench would notice."""
     from visloc.flow import direct
-    from visloc.markers import bits, contours, corners_batch, refine
+    from visloc.markers import binarize, bits, contours, corners_batch, refine
     from visloc.pose import gauss_newton
 
-    assert contours.NATIVE_BORDERS and corners_batch.NATIVE_QUADS and refine.NATIVE_REFINE
+    assert binarize._threshold is not None and contours.NATIVE_BORDERS and corners_batch.NATIVE_QUADS and refine.NATIVE_REFINE
     assert bits.NATIVE_CELLS and gauss_newton.NATIVE_LM and direct.NATIVE_DIRECT
 
 
-SOURCES = {"_borders": "visloc/markers/_borders.c", "_filter": "visloc/markers/_filter.c",
+SOURCES = {"_threshold": "visloc/markers/_threshold.c", "_borders": "visloc/markers/_borders.c", "_filter": "visloc/markers/_filter.c",
            "_quads": "visloc/markers/_quads.c", "_refine": "visloc/markers/_refine.c",
            "_cells": "visloc/markers/_cells.c", "_lm": "visloc/pose/_lm.c", "_direct": "visloc/flow/_direct.c"}
 

@@ -1,3 +1,4 @@
+import cv2
 import numpy as np
 import pytest
 
@@ -50,6 +51,25 @@ def test_threshold_marks_dark_border_of_a_square_as_ink():
     assert b[5, 5] == 0 and b[30, 30] == 0  # flat areas (bright or dark) are not
     with pytest.raises(ValueError, match="window"):
         threshold(img, window=4)
+
+
+@pytest.mark.skipif(__import__("visloc.markers.binarize", fromlist=["_"])._threshold is None,
+                    reason="built without a C compiler: OpenCV's threshold runs")
+def test_compiled_threshold_is_opencvs_pixel_for_pixel():
+    """visloc.markers._threshold against cv2.adaptiveThreshold (MEAN_C, BINARY_INV) on noise,
+    binary and smooth images of odd sizes, every window from 3 to 51 and offsets that are
+    negative, fractional (floored as OpenCV does) or beyond the grey range."""
+    rng = np.random.default_rng(5)
+    images = [rng.integers(0, 256, (1, 1), np.uint8), rng.integers(0, 256, (2, 37), np.uint8),
+              rng.integers(0, 256, (53, 3), np.uint8), (rng.integers(0, 2, (40, 61)) * 255).astype(np.uint8),
+              np.clip(rng.normal(128, 50, (97, 130)), 0, 255).astype(np.uint8),
+              cv2.GaussianBlur(rng.integers(0, 256, (120, 90), np.uint8), (0, 0), 3)]
+    for img in images:
+        for window in range(3, 52, 2):
+            for offset in (7, 4, 0, -3, 2.5, -0.5, 300, -300):
+                ours = threshold(img, window=window, offset=offset, native=True)
+                theirs = threshold(img, window=window, offset=offset, native=False)
+                assert np.array_equal(ours, theirs), (img.shape, window, offset)
 
 
 def test_default_window_is_odd_and_scales():

@@ -416,7 +416,8 @@ class MarkerDetector:
         candidates = replace(p.candidates, min_side=min_side,
                              border_distance=p.candidates.border_distance / scale.max())
         blurred = blur(work, sigma=p.blur_sigma)  # stage 2
-        binary = threshold(blurred, window=window, offset=p.offset if sp.offset is None else sp.offset)  # stage 3
+        binary = threshold(blurred, window=window, offset=p.offset if sp.offset is None else sp.offset,
+                           native=p.native)  # stage 3
         # stage 4: a marker's frame encloses its white cells, so ink without a hole is no marker;
         # stage 5 on those borders
         return self._polygons(_PassImage(work.shape, scale, window, candidates, blurred, binary,

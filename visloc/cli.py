@@ -405,6 +405,8 @@ def check_outputs(args: argparse.Namespace) -> None:
             if out in f.parents:
                 raise UsageError(f"{what} holds the input {f}: write outputs elsewhere")
         near = next(a for a in (out, *out.parents) if a.exists())  # the nearest folder that exists
+        if near != out and not near.is_dir():
+            raise UsageError(f"{what}: cannot write there ({near} is a file, not a folder)")
         if not os.access(near if near.is_dir() else near.parent, os.W_OK):
             raise UsageError(f"{what}: cannot write there ({near} is not writable)")
 
@@ -435,8 +437,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command == "render" and args.what is None:
         parser.parse_args(["render", "--help"])
     if args.command == "render" and args.what in ("localize", "flow") and args.seconds * args.fps > MAX_RENDER_FRAMES:
-        parser.error(f"render {args.what}: --seconds x --fps is {args.seconds * args.fps:g} frames, at most "
-                     f"{MAX_RENDER_FRAMES} (they are rendered in memory)")
+        print(f"visloc render: error: render {args.what}: --seconds x --fps is {args.seconds * args.fps:g} frames, "
+              f"at most {MAX_RENDER_FRAMES} (they are rendered in memory)", file=sys.stderr)
+        return 2
     # only the sub-command's own module is imported (late: `visloc --help`, `visloc model` and
     # configuration errors stay fast)
     module, name = _COMMANDS[args.command]

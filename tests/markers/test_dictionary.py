@@ -50,7 +50,7 @@ def test_malformed_yaml_is_rejected(tmp_path):
 def test_empty_or_garbage_yaml_is_a_clear_error(tmp_path, text):
     p = tmp_path / "dict.yml"
     p.write_bytes(text.encode("latin-1"))
-    with pytest.raises(ValueError, match="could not be read as OpenCV YAML|could not be opened|lacks"):
+    with pytest.raises(ValueError, match=r"dictionary file .* (is empty|is not OpenCV FileStorage|lacks)"):
         load_dictionary(str(p))
 
 

@@ -29,6 +29,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from visloc._storage import open_storage
 from visloc.markers.binarize import to_gray
 from visloc.markers.detector import MarkerDetector
 from visloc.markers.dictionary import load_dictionary
@@ -227,12 +228,7 @@ class CharucoBoard:
             (the message names it).
         """
         path = Path(path)
-        if not path.is_file():
-            raise ValueError(f"board file {path} does not exist")
-        try:
-            fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-        except cv2.error as exc:
-            raise ValueError(f"board file {path} is not OpenCV YAML: {exc.err.strip()}") from None
+        fs = open_storage(path, "board file")
         key = "board_type"
         try:
             kind = fs.getNode("board_type").string()

@@ -102,15 +102,31 @@ def open_timed_source(stack, args: argparse.Namespace):
 
 
 def read_columns(path: str, option: str, columns: tuple[str, ...]) -> dict[str, np.ndarray]:
-    """The named ``columns`` of the CSV at ``path`` (header row required), as 1-d float arrays;
-    a missing file or column is a :class:`visloc.cli.UsageError` naming ``option``."""
+    """The named ``columns`` of the CSV at ``path`` (header row required), as 1-d float arrays,
+    one entry per data row: a row with another number of fields than the header, or a field
+    that is not a number, gives NaN there (the caller says which rows it skips). A missing or
+    unreadable file or a missing column is a :class:`visloc.cli.UsageError` naming ``option``."""
+    import csv
+
     from visloc.errors import UsageError
 
     try:
-        data = np.genfromtxt(path, delimiter=",", names=True)
-    except (OSError, ValueError) as exc:
+        with open(path, newline="") as fh:
+            rows = [r for r in csv.reader(fh) if r]
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise UsageError(f"cannot read {option} {path}: {exc}") from None
-    if data.dtype.names is None or not set(columns) <= set(data.dtype.names):
+    header = [h.strip() for h in rows[0]] if rows else []
+    if not set(columns) <= set(header):
         names = ", ".join(columns[:-1]) + f" and {columns[-1]}"
         raise UsageError(f"{option} {path} needs a header with {names} columns")
-    return {k: np.atleast_1d(data[k]) for k in columns}
+    where = [header.index(k) for k in columns]
+    data = np.full((len(rows) - 1, len(columns)), np.nan)
+    for i, row in enumerate(rows[1:]):
+        if len(row) != len(header):
+            continue
+        for j, k in enumerate(where):
+            try:
+                data[i, j] = float(row[k])
+            except ValueError:
+                pass
+    return {k: data[:, j] for j, k in enumerate(columns)}

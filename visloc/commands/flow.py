@@ -51,13 +51,22 @@ def _read_heights(path: str) -> dict[int, float]:
         raise UsageError(f"cannot read --height-csv {path}: {exc.strerror}") from None
     if not rows or "frame" not in rows[0] or "height" not in rows[0]:
         raise UsageError(f"--height-csv {path} needs a header with 'frame' and 'height' columns")
-    try:
-        heights = {int(r["frame"]): float(r["height"]) for r in rows}
-    except ValueError as exc:
-        raise UsageError(f"--height-csv {path}: {exc}") from None
-    bad = [f for f, h in heights.items() if not 0 < h < float("inf")]
-    if bad:
-        raise UsageError(f"--height-csv {path}: non-positive height at frame {bad[0]}")
+    heights, bad = {}, []
+    for line, r in enumerate(rows, start=2):  # file line numbers (the header is line 1)
+        try:
+            frame, height = int(r["frame"]), float(r["height"])
+        except (TypeError, ValueError):
+            frame, height = -1, float("nan")
+        if frame < 0 or not 0 < height < float("inf"):
+            bad.append(line)
+        else:
+            heights[frame] = height
+    if bad:  # a bad row costs its frame only (it is then recorded as without a height)
+        shown = ", ".join(map(str, bad[:5])) + (" ..." if len(bad) > 5 else "")
+        warn("flow", f"--height-csv {path}: {len(bad)} rows without a frame number and a positive height "
+                     f"skipped (lines {shown})")
+    if not heights:
+        raise UsageError(f"--height-csv {path}: no row has a frame number and a positive height")
     return heights
 
 FLOW_COLUMNS = ["frame", "time", "source", "vx", "vy", "speed", "yaw_rate", "quality", "reason", "x", "y", "yaw"]

@@ -65,20 +65,26 @@ def render_localize(args: argparse.Namespace) -> int:
           f"ground_truth.csv to {out}")
     return 0
 
+def _finite_rows(path: str, option: str, columns: tuple[str, ...]) -> np.ndarray:
+    """(M, len(columns)) of the CSV's rows whose named fields are all finite numbers, in file
+    order; the others (NaN, inf, text, a wrong field count) are said on one warning line."""
+    cols = read_columns(path, option, columns)
+    rows = np.column_stack([cols[k] for k in columns])
+    good = np.isfinite(rows).all(axis=1)
+    if not good.all():  # said, not silently dropped
+        bad = np.flatnonzero(~good) + 2  # file line numbers (the header is line 1)
+        shown = ", ".join(map(str, bad[:5])) + (" ..." if len(bad) > 5 else "")
+        warn("localize", f"{option} {path}: {len(bad)} rows without finite numbers skipped (lines {shown})")
+    rows = rows[good]
+    if len(rows) == 0 or (np.diff(rows[:, 0]) <= 0).any():
+        raise UsageError(f"{option} {path}: times must be finite and increasing")
+    return rows
+
+
 def _read_imu(path: str) -> np.ndarray:
     """(M, 4) ``t, fx, fy, fz`` (specific force in camera axes, m/s^2) from an IMU CSV with
     columns ``t,gx,gy,gz,fx,fy,fz`` (as ``visloc render localize`` writes), sorted by time."""
-    cols = read_columns(path, "--imu", ("t", "fx", "fy", "fz"))
-    imu = np.column_stack([cols[k] for k in ("t", "fx", "fy", "fz")])
-    good = np.isfinite(imu).all(axis=1)
-    if not good.all():  # NaN, inf or text (read as NaN): said, not silently dropped
-        bad = np.flatnonzero(~good) + 2  # file line numbers (the header is line 1)
-        shown = ", ".join(map(str, bad[:5])) + (" ..." if len(bad) > 5 else "")
-        warn("localize", f"--imu {path}: {len(bad)} rows without finite numbers skipped (lines {shown})")
-    imu = imu[good]
-    if len(imu) == 0 or (np.diff(imu[:, 0]) <= 0).any():
-        raise UsageError(f"--imu {path}: times must be finite and increasing")
-    return imu
+    return _finite_rows(path, "--imu", ("t", "fx", "fy", "fz"))
 
 def localize(args: argparse.Namespace) -> int:
     """``visloc localize``: the camera's position over a marker map per frame, filtered by a
@@ -103,7 +109,10 @@ def localize(args: argparse.Namespace) -> int:
     dictionary_for(args, "localize", mmap)
     detector = detector_for(args)
     camera = Camera.from_file(args.camera)
-    truth = read_columns(args.truth, "--truth", ("t", "x", "y", "z")) if args.truth else None
+    truth = None
+    if args.truth:
+        truth = dict(zip(("t", "x", "y", "z"), _finite_rows(args.truth, "--truth", ("t", "x", "y", "z")).T,
+                         strict=True))
     imu = _read_imu(args.imu) if args.imu else None
     fusion = MapFixFusion(accel_noise=args.accel_noise)  # the map's z axis points up: gravity (0, 0, -9.81)
     R_map_cam = None

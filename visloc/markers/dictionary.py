@@ -16,6 +16,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from visloc._storage import open_storage
+
 #: OpenCV predefined dictionary names visloc accepts (case-insensitive for the family tag).
 PREDEFINED = tuple(
     sorted({n for n in dir(cv2.aruco) if n.startswith("DICT_") and not n.endswith(("H5", "H9", "H10", "H11", "H12"))})
@@ -153,13 +155,8 @@ def _predefined(name: str) -> Dictionary:
 
 
 def _from_yaml(path: str) -> Dictionary:
+    fs = open_storage(path, "dictionary file")
     try:
-        fs = cv2.FileStorage(path, cv2.FILE_STORAGE_READ)
-    except (cv2.error, SystemError) as e:  # OpenCV's parser raises on garbage and empty files
-        raise ValueError(f"dictionary file {path!r} could not be read as OpenCV YAML (empty or malformed)") from e
-    try:
-        if not fs.isOpened():
-            raise ValueError(f"dictionary file {path!r} could not be opened as OpenCV YAML")
         n = fs.getNode("nmarkers")
         s = fs.getNode("markersize")
         if n.empty() or s.empty():

@@ -12,7 +12,6 @@ is OpenCV's (x right, y down, z forward).
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -21,6 +20,7 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike
 
+from visloc._storage import open_storage
 from visloc.types import FloatArray
 
 if TYPE_CHECKING:
@@ -32,13 +32,6 @@ DIST_SIZES = (4, 5, 8, 12, 14)
 # Undistortion is iterative; OpenCV's default (5 iterations) leaves ~0.01 px of error at the
 # border of a strongly distorted 640x480 image (k1 = -0.3). This converges to ~1e-12 px.
 _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-12)
-
-
-def _cv_message(exc: BaseException) -> str:
-    """The useful part of an OpenCV error message (its text after the source location)."""
-    text = " ".join(str(exc).split())
-    m = re.search(r"error: \([-\d]+:[^)]*\) (.*)$", text)
-    return m.group(1) if m else (text or "parse error")
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -212,23 +205,8 @@ class Camera:
             names the path and the problem.
         """
         path = Path(path)
-        if not path.is_file():
-            raise ValueError(f"camera file {str(path)!r} does not exist")
-        if path.stat().st_size == 0:
-            raise ValueError(f"camera file {str(path)!r} is empty")
+        fs = open_storage(path, "camera file")
         try:
-            fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-        except (cv2.error, SystemError) as exc:
-            cause = exc.__cause__ if isinstance(exc, SystemError) and exc.__cause__ else exc
-            msg = _cv_message(cause)
-            raise ValueError(
-                f"camera file {str(path)!r} is not OpenCV FileStorage: {msg}"
-            ) from None
-        try:
-            if not fs.isOpened():
-                raise ValueError(
-                    f"camera file {str(path)!r} could not be opened by cv2.FileStorage"
-                )
             K = cls._read_matrix(fs, "camera_matrix", path, required=True)
             dist = cls._read_matrix(fs, "distortion_coefficients", path, required=False)
             w = cls._read_int(fs, "image_width", path)

@@ -14,10 +14,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from visloc._storage import open_storage
 from visloc.types import Pose
 
 __all__ = ["GridMap", "MarkerMap"]
@@ -135,12 +135,7 @@ class MarkerMap:
             corner numbers, duplicate ids, or corners that are not a planar square.
         """
         p = Path(path)
-        if not p.is_file():
-            raise ValueError(f"marker map {p} does not exist")
-        try:
-            fs = cv2.FileStorage(str(p), cv2.FILE_STORAGE_READ)
-        except (cv2.error, SystemError):  # the binding wraps parse errors in SystemError
-            raise ValueError(f"marker map {p} is not OpenCV FileStorage YAML") from None
+        fs = open_storage(p, "marker map")
         try:
             node = fs.getNode("markers")
             if node.empty() or not node.isSeq():

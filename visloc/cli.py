@@ -134,9 +134,7 @@ def _add_detect(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--rerun", metavar="FILE.rrd", help="write a rerun recording")
     d.add_argument("--explain", metavar="DIR", help="write every detector stage's picture per frame")
     d.add_argument("--fps", type=_positive, help="frame rate for image lists (frame times)")
-    d.add_argument("--max-frames", type=_count, metavar="N", help="stop after N frames")
-    _detector_arguments(d)
-    d.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    _detection_tail(d)
 
 
 def _add_render(sub: argparse._SubParsersAction) -> None:
@@ -227,8 +225,7 @@ def _add_flow(sub: argparse._SubParsersAction) -> None:
 def _add_localize(sub: argparse._SubParsersAction) -> None:
     """The ``visloc localize`` sub-command's arguments."""
     lz = sub.add_parser("localize", help="camera position and velocity over a marker map (pose + Kalman filter)")
-    lz.add_argument("source", help="image, folder, glob pattern, video file or camera index")
-    lz.add_argument("--camera", required=True, metavar="FILE", help="camera file (OpenCV YAML)")
+    _source_and_camera(lz)
     lz.add_argument("--map", required=True, metavar="MAP.yml", help="marker map (OpenCV YAML)")
     lz.add_argument("--dict", default=None, metavar="NAME|FILE", help="marker dictionary (default: the one the map records, else DICT_4X4_50)")
     lz.add_argument("--fps", type=_positive, help="frame rate (required for image folders)")
@@ -238,16 +235,26 @@ def _add_localize(sub: argparse._SubParsersAction) -> None:
     lz.add_argument("--truth", metavar="FILE.csv", help="ground truth (t,x,y,z columns) to compare with")
     lz.add_argument("--out", metavar="FILE.csv", help="write one row per frame")
     lz.add_argument("--rerun", metavar="FILE.rrd", help="write a rerun recording (estimate vs truth)")
-    lz.add_argument("--max-frames", type=_count, metavar="N", help="stop after N frames")
-    _detector_arguments(lz)
-    lz.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    _mavlink_options(lz, "every fix as VISION_POSITION_ESTIMATE (or ODOMETRY)")
+    lz.add_argument("--mavlink-message", choices=("vision", "odometry"), default="vision",
+                    help="VISION_POSITION_ESTIMATE (default) or ODOMETRY (with velocity)")
+    _detection_tail(lz)
+
+
+def _mavlink_options(p: argparse.ArgumentParser, what: str) -> None:
+    """``--mavlink`` and ``--map-frame`` (visloc.io.mavlink)."""
+    p.add_argument("--mavlink", nargs="?", const="udpout:127.0.0.1:14550", metavar="URL",
+                   help=f"send {what} to a flight stack: a pymavlink connection string (default "
+                        "udpout:127.0.0.1:14550; needs visloc[mavlink])")
+    p.add_argument("--map-frame", choices=("nwu", "enu"), default="nwu",
+                   help="how the map's x, y, z lie in the flight stack's NED frame: nwu (x north, y west, z up; "
+                        "default) or enu (x east, y north, z up)")
 
 
 def _add_track(sub: argparse._SubParsersAction) -> None:
     """The ``visloc track`` sub-command's arguments."""
     tk = sub.add_parser("track", help="a body's markers relative to reference markers, seen by a fixed camera")
-    tk.add_argument("source", help="image, folder, glob pattern, video file or camera index")
-    tk.add_argument("--camera", required=True, metavar="FILE", help="camera file (OpenCV YAML)")
+    _source_and_camera(tk)
     tk.add_argument("--body", required=True, metavar="BODY.yml", help="marker map of the tracked body")
     tk.add_argument("--reference", required=True, metavar="REF.yml", help="marker map of the reference")
     tk.add_argument("--dict", default=None, metavar="NAME|FILE", help="marker dictionary (default: the one the map records, else DICT_4X4_50)")
@@ -257,9 +264,7 @@ def _add_track(sub: argparse._SubParsersAction) -> None:
     tk.add_argument("--fps", type=_positive, help="frame rate (required for image folders: the observer needs frame times)")
     tk.add_argument("--poles", type=float, nargs=2, default=(-4.0, -4.0), metavar="P",
                     help="velocity observer poles, 1/s (report eq. 3.14; default -4 -4)")
-    tk.add_argument("--max-frames", type=_count, metavar="N", help="stop after N frames")
-    _detector_arguments(tk)
-    tk.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    _detection_tail(tk)
 
 
 def _add_model(sub: argparse._SubParsersAction) -> None:
@@ -307,6 +312,19 @@ def _add_demo(sub: argparse._SubParsersAction) -> None:
     m.add_argument("--out", default="visloc-demo", metavar="DIR", help="output folder (default ./visloc-demo)")
     m.add_argument("--frames", type=_count, default=6, help="number of frames (default 6)")
     m.add_argument("--seed", type=int, default=7, help="random seed (default 7)")
+
+
+def _source_and_camera(p: argparse.ArgumentParser) -> None:
+    """The frame source and the required camera file of ``localize`` and ``track``."""
+    p.add_argument("source", help="image, folder, glob pattern, video file or camera index")
+    p.add_argument("--camera", required=True, metavar="FILE", help="camera file (OpenCV YAML)")
+
+
+def _detection_tail(p: argparse.ArgumentParser) -> None:
+    """``--max-frames``, the detector options and ``--quiet``, last of ``detect``, ``localize``, ``track``."""
+    p.add_argument("--max-frames", type=_count, metavar="N", help="stop after N frames")
+    _detector_arguments(p)
+    p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
 
 
 def _detector_arguments(p: argparse.ArgumentParser) -> None:

@@ -102,6 +102,7 @@ def localize(args: argparse.Namespace) -> int:
     """
     from visloc.estimation.fusion import MapFixFusion
     from visloc.io import CsvWriter
+    from visloc.io.mavlink import MavlinkSink
     from visloc.pose.map_pose import estimate_camera_pose
     from visloc.pose.maps import MarkerMap
 
@@ -124,6 +125,7 @@ def localize(args: argparse.Namespace) -> int:
         source = open_timed_source(stack, args)
         out = stack.enter_context(CsvWriter(args.out, LOCALIZE_COLUMNS)) if args.out else None
         rec = stack.enter_context(RerunLogger(args.rerun)) if args.rerun else None
+        link = stack.enter_context(MavlinkSink(args.mavlink)) if getattr(args, "mavlink", None) else None
         warned = [False]
         for frame in frames_of(source, args):
             n_frames += 1
@@ -163,6 +165,8 @@ def localize(args: argparse.Namespace) -> int:
                 errors.append(row["error_m"])
             if out:
                 out.write(row)
+            if link is not None and fix == "used":
+                _send_fix(link, args, fusion, mp.R_map_cam, frame.time)
             if rec:
                 rec.log_localize(frame.index, frame.time, frame.image, pos, true_pos)
     if imu is not None and len(frame_times) > 1 and imu_used == 0:
@@ -175,6 +179,29 @@ def localize(args: argparse.Namespace) -> int:
         print(f"visloc localize: {n_frames} frames, {fixes} position fixes, {failed} unreadable{used}{err}",
               file=sys.stderr)
     return 1 if failed else 0
+
+def _send_fix(link, args: argparse.Namespace, fusion, R_map_cam: np.ndarray, t: float) -> None:
+    """The filter's estimate after a fix, to the flight stack (``--mavlink``): position (and
+    velocity) in its local NED frame, the body's attitude from the camera's (a downward camera,
+    ``visloc.io.mavlink``), the filter's position (and velocity) covariance; the attitude's
+    variances are unknown (NaN: the flight stack uses its own noise setting)."""
+    from visloc.io.mavlink import MAP_FRAMES, body_attitude_ned
+    from visloc.pose.rotations import matrix_to_euler
+
+    F = MAP_FRAMES[args.map_frame]
+    R = body_attitude_ned(R_map_cam, args.map_frame)
+    kf = fusion.kf
+    pose_cov = np.full((6, 6), np.nan)
+    pose_cov[:3, :3] = F @ kf.position_covariance @ F.T
+    if args.mavlink_message == "odometry":
+        vel_cov = np.full((6, 6), np.nan)
+        vel_cov[:3, :3] = F @ kf.velocity_covariance @ F.T
+        link.send_odometry(t, F @ fusion.position, R, F @ fusion.velocity, pose_covariance=pose_cov,
+                           velocity_covariance=vel_cov, reset_counter=kf.resets)
+    else:
+        link.send_vision_position(t, F @ fusion.position, matrix_to_euler(R), covariance=pose_cov,
+                                  reset_counter=kf.resets)
+
 
 def track(args: argparse.Namespace) -> int:
     """``visloc track``: pose of a body relative to reference markers, per frame, with an

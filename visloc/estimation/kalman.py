@@ -264,6 +264,18 @@ class PositionVelocityKF:
         return self.kf.x[self._idx["velocity"], 0].copy()
 
     @property
+    def position_covariance(self) -> FloatArray:
+        """Covariance of the position (dims, dims), m^2; a copy."""
+        i = self._idx["position"]
+        return self.kf.P[np.ix_(i, i)].copy()
+
+    @property
+    def velocity_covariance(self) -> FloatArray:
+        """Covariance of the velocity (dims, dims), m^2/s^2; a copy."""
+        i = self._idx["velocity"]
+        return self.kf.P[np.ix_(i, i)].copy()
+
+    @property
     def acceleration(self) -> FloatArray:
         """Acceleration estimate (dims,), m/s^2 (``"ca"`` only)."""
         if self.model != "ca":

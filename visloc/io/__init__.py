@@ -8,9 +8,13 @@ Writers
     (video or PNG folder), :func:`draw_markers`.
 Visualisation
     :class:`RerunLogger` writes a rerun ``.rrd`` recording.
+Drone links
+    :class:`MavlinkSink` sends estimates to PX4 / ArduPilot as MAVLink messages
+    (``visloc.io.mavlink``; pymavlink, the extra ``visloc[mavlink]``).
 """
 
 from visloc.io.draw import draw_markers
+from visloc.io.mavlink import MavlinkSink
 from visloc.io.rerun_log import RerunLogger
 from visloc.io.sources import (
     IMAGE_EXTENSIONS,
@@ -34,6 +38,7 @@ __all__ = [
     "FrameSource",
     "ImageListSource",
     "JsonlWriter",
+    "MavlinkSink",
     "RerunLogger",
     "SourceError",
     "VideoSource",

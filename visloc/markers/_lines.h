@@ -1,11 +1,14 @@
 /* Lines shared by the compiled stages 6-7 (_quads.c) and 8 (_refine.c): a weighted
  * total-least-squares line and the corners of the quadrilateral four lines bound, as
- * visloc.markers.corners.fit_lines and quad_from_lines compute them. */
+ * visloc.markers.corners.fit_lines and quad_from_lines compute them, and the packing of
+ * both stages' (corners, ok) result. */
 #ifndef VISLOC_LINES_H
 #define VISLOC_LINES_H
 
+#include <Python.h>
 #include <math.h>
 #include <stdint.h>
+#include <stdlib.h>
 
 /* a x + b y = c (unit normal) through m points (px, py) with weights w (NULL: all 1). */
 static void tls_line(const double *px, const double *py, const double *w, int64_t m, double line[3]) {
@@ -43,6 +46,16 @@ static int quad_corners(const double lines[4][3], double corners[8]) {
         if (!isfinite(corners[2 * k]) || !isfinite(corners[2 * k + 1])) return 0;
     }
     return 1;
+}
+
+/* (corners, ok) when the work buffer and both bytes objects were allocated, else NULL with a
+ * MemoryError; drops the references to corners and ok and frees work either way. */
+static PyObject *corners_result(PyObject *corners, PyObject *ok, double *work) {
+    PyObject *result = work && corners && ok ? Py_BuildValue("(OO)", corners, ok) : PyErr_NoMemory();
+    Py_XDECREF(corners);
+    Py_XDECREF(ok);
+    free(work);
+    return result;
 }
 
 #endif

@@ -260,13 +260,8 @@ static PyObject *fit_quads(PyObject *self, PyObject *args) {
                     for (int m = 0; m < 8; m++) c[8 * i + m] = NAN;
             }
             Py_END_ALLOW_THREADS
-            result = Py_BuildValue("(OO)", corners, ok);
-        } else {
-            PyErr_NoMemory();
         }
-        Py_XDECREF(corners);
-        Py_XDECREF(ok);
-        free(work);
+        result = corners_result(corners, ok, work);
     }
     PyBuffer_Release(&pts);
     PyBuffer_Release(&offs);

@@ -452,13 +452,8 @@ static PyObject *refine_quads(PyObject *self, PyObject *args) {
                     bend_one(&im, c + 8 * i, rad[i], force, work);
             }
             Py_END_ALLOW_THREADS
-            result = Py_BuildValue("(OO)", corners, ok);
-        } else {
-            PyErr_NoMemory();
         }
-        Py_XDECREF(corners);
-        Py_XDECREF(ok);
-        free(work);
+        result = corners_result(corners, ok, work);
     }
     PyBuffer_Release(&gray);
     PyBuffer_Release(&quads);

@@ -11,6 +11,7 @@ import numpy as np
 
 from visloc.model.rigid_body import STATE_NAMES
 from visloc.sim.loop import SimResult
+from visloc.types import FloatArray
 
 __all__ = ["save_plot", "save_rerun", "write_csv"]
 
@@ -22,6 +23,17 @@ def _check_path(path: str | os.PathLike[str], suffix: str) -> Path:
     if out.suffix.lower() != suffix:
         raise ValueError(f"path: expected a {suffix} file, got {out}")
     out.parent.mkdir(parents=True, exist_ok=True)
+    return out
+
+
+def _positions_up(result: SimResult) -> list[tuple[str, FloatArray, FloatArray, FloatArray]]:
+    """Per axis: label (x, y, height) and true, estimated and set-point values, height up."""
+    out = []
+    for j, name in enumerate("xyz"):
+        sign = -1.0 if name == "z" else 1.0  # plot the height, up positive
+        label = "height" if name == "z" else name
+        out.append((label, sign * result.state[:, j], sign * result.estimate[:, j],
+                    sign * result.setpoint[:, j]))
     return out
 
 
@@ -99,12 +111,11 @@ def save_plot(result: SimResult, path: str | os.PathLike[str]) -> Path:
         raise ImportError("save_plot needs matplotlib: pip install visloc[plot]") from exc
     t = result.t
     fig, ax = plt.subplots(3, 1, figsize=(8, 8), sharex=True)
-    for j, (name, colour) in enumerate(zip("xyz", ("C0", "C1", "C2"), strict=True)):
-        sign = -1.0 if name == "z" else 1.0  # plot the height, up positive
-        label = "height" if name == "z" else name
-        ax[0].plot(t, sign * result.state[:, j], colour, label=f"{label} true")
-        ax[0].plot(t, sign * result.estimate[:, j], colour, ls="--", lw=0.8, label=f"{label} estimate")
-        ax[0].plot(t, sign * result.setpoint[:, j], colour, ls=":", lw=0.8)
+    curves = _positions_up(result)
+    for (label, true, est, sp), colour in zip(curves, ("C0", "C1", "C2"), strict=True):
+        ax[0].plot(t, true, colour, label=f"{label} true")
+        ax[0].plot(t, est, colour, ls="--", lw=0.8, label=f"{label} estimate")
+        ax[0].plot(t, sp, colour, ls=":", lw=0.8)
     ax[0].set_ylabel("position, m (height up)")
     ax[0].legend(ncol=3, fontsize=7)
     for j, name in enumerate(("roll", "pitch", "yaw")):
@@ -170,12 +181,10 @@ def save_rerun(result: SimResult, path: str | os.PathLike[str]) -> Path:
     rec.send_columns("world/drone", indexes=[times],
                      columns=rr.Transform3D.columns(translation=pos, quaternion=quat))
     series = {}
-    for j, name in enumerate("xyz"):
-        sign = -1.0 if name == "z" else 1.0
-        label = "height" if name == "z" else name
-        series[f"plots/position/{label}/true"] = sign * result.state[:, j]
-        series[f"plots/position/{label}/estimate"] = sign * result.estimate[:, j]
-        series[f"plots/position/{label}/setpoint"] = sign * result.setpoint[:, j]
+    for label, true, estimate, setpoint in _positions_up(result):
+        series[f"plots/position/{label}/true"] = true
+        series[f"plots/position/{label}/estimate"] = estimate
+        series[f"plots/position/{label}/setpoint"] = setpoint
     for j, name in enumerate(("roll", "pitch", "yaw")):
         series[f"plots/attitude/{name}"] = np.degrees(result.state[:, 6 + j])
     for j in range(4):

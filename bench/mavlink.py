@@ -1,0 +1,101 @@
+"""MAVLink out: time from an estimate being ready to its datagram being sent (issue 18's
+"added latency per frame"), for each message visloc sends, on a loopback UDP link with a
+pymavlink receiver draining it.
+
+    python bench/mavlink.py            # writes bench/results/mavlink.{json,md}
+
+Each row times ``visloc localize``'s own per-fix step (:func:`visloc.commands.localize._send_fix`:
+the frame change, the body attitude, the covariance blocks, packing, the send) over a
+filter that has taken real fixes, N calls, median and 90th percentile in microseconds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+from _results import fmt, write_results
+
+from visloc.commands.localize import _send_fix
+from visloc.estimation.fusion import MapFixFusion
+from visloc.io.mavlink import MavlinkSink
+
+ROOT = Path(__file__).resolve().parents[1]
+RECEIVER = """
+import sys
+from pymavlink import mavutil
+rx = mavutil.mavlink_connection(f"udpin:127.0.0.1:{sys.argv[1]}", dialect="common")
+n = 0
+while rx.recv_match(blocking=True, timeout=2.0) is not None:
+    n += 1
+print(n)
+"""
+
+
+def _filter() -> MapFixFusion:
+    fusion = MapFixFusion()
+    rng = np.random.default_rng(0)
+    for k in range(30):
+        fusion.predict(k / 30)
+        fusion.fix(np.array([0.1 * k / 30, 0.0, 1.2]) + rng.normal(0, 0.002, 3), np.eye(3) * 4e-6)
+    return fusion
+
+
+def run(n: int) -> dict:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    # the receiver in its own process, as a flight stack is: it counts until the link is quiet
+    rx = subprocess.Popen([sys.executable, "-c", RECEIVER, str(port)], stdout=subprocess.PIPE, text=True)
+    time.sleep(1.0)  # bound and listening
+    fusion = _filter()
+    R_map_cam = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+    rows = {}
+    with MavlinkSink(f"udpout:127.0.0.1:{port}") as link:
+        for message in ("vision", "odometry"):
+            args = SimpleNamespace(map_frame="nwu", mavlink_message=message)
+            for k in range(50):  # warm: the first calls import and allocate
+                _send_fix(link, args, fusion, R_map_cam, k / 30)
+            spent = []
+            for k in range(n):
+                t0 = time.perf_counter()
+                _send_fix(link, args, fusion, R_map_cam, 1.0 + k / 30)
+                spent.append(time.perf_counter() - t0)
+            us = 1e6 * np.array(spent)
+            rows[message] = {"calls": n, "median_us": float(np.median(us)), "p90_us": float(np.percentile(us, 90))}
+        sent = sum(link.sent.values())
+    received = int(rx.communicate(timeout=30)[0])
+    return {"rows": rows, "sent": sent, "received": received}
+
+
+def markdown(result: dict) -> str:
+    lines = [("**MAVLink out** (loopback UDP, a pymavlink receiver in another process; per fix: frame change, "
+              "attitude, covariances, pack, send)"), "",
+             "| message | calls | median µs | p90 µs |", "|---|---|---|---|"]
+    names = {"vision": "VISION_POSITION_ESTIMATE", "odometry": "ODOMETRY"}
+    for k, r in result["rows"].items():
+        lines.append(f"| {names[k]} | {r['calls']} | {fmt(r['median_us'], 1)} | {fmt(r['p90_us'], 1)} |")
+    lines += ["", f"Messages sent {result['sent']} (heartbeats included), received {result['received']}."]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, default=2000)
+    ap.add_argument("--out", default=str(ROOT / "bench/results"))
+    args = ap.parse_args(argv)
+    result = run(args.n)
+    result["machine"] = {"python": sys.version.split()[0], "platform": platform.platform()}
+    write_results(args.out, "mavlink", result, markdown(result))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,122 @@
+"""MAVLink out (``visloc.io.mavlink``, ``visloc localize --mavlink``): a real pymavlink
+receiver on a loopback port decodes what visloc sends."""
+
+import csv
+import math
+import socket
+
+import numpy as np
+import pytest
+from pymavlink import mavutil  # in the test extras (pip install -e ".[test]")
+
+from visloc.cli import main
+from visloc.io.mavlink import MAP_FRAMES, MavlinkSink, body_attitude_ned
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _receive(rx, limit: int = 2000) -> list:
+    msgs = []
+    while len(msgs) < limit and (m := rx.recv_match(blocking=True, timeout=0.3)) is not None:
+        if m.get_type() != "BAD_DATA":
+            msgs.append(m)
+    return msgs
+
+
+def test_sink_messages_decode_with_their_fields_and_ids():
+    port = _free_port()
+    rx = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", dialect="common")
+    cov = np.diag([1e-4, 2e-4, 3e-4, 1e-3, 2e-3, 3e-3])
+    with MavlinkSink(f"udpout:127.0.0.1:{port}", component_id=191) as link:
+        link.send_vision_position(2.5, (1.0, -2.0, -1.5), (0.1, -0.2, 0.3), covariance=cov, reset_counter=258)
+        link.send_odometry(2.6, (1.0, -2.0, -1.5), np.eye(3), (0.5, 0.0, -0.1))
+    msgs = _receive(rx)
+    rx.close()
+    kinds = [m.get_type() for m in msgs]
+    assert kinds == ["HEARTBEAT", "VISION_POSITION_ESTIMATE", "ODOMETRY"]
+    assert all(m.get_srcSystem() == 1 and m.get_srcComponent() == 191 for m in msgs)
+    vpe, odo = msgs[1], msgs[2]
+    assert vpe.usec == 2_500_000 and vpe.reset_counter == 2  # 258 mod 256
+    assert (vpe.x, vpe.y, vpe.z) == pytest.approx((1.0, -2.0, -1.5))
+    assert vpe.covariance[0] == pytest.approx(1e-4) and vpe.covariance[6] == pytest.approx(2e-4)
+    assert vpe.covariance[20] == pytest.approx(3e-3)  # yaw variance: the last of the upper triangle
+    assert odo.time_usec == 2_600_000 and list(odo.q) == pytest.approx([1, 0, 0, 0])
+    assert (odo.vx, odo.vy, odo.vz) == pytest.approx((0.5, 0.0, -0.1)) and math.isnan(odo.pose_covariance[0])
+
+
+def test_nobody_listening_loses_nothing_on_our_side():
+    with MavlinkSink(f"udpout:127.0.0.1:{_free_port()}") as link:
+        for k in range(50):
+            link.send_vision_position(k / 30, (0.0, 0.0, -1.0), (0.0, 0.0, 0.0))
+    assert link.sent["VISION_POSITION_ESTIMATE"] == 50
+
+
+def test_quaternions_are_scipys_in_mavlinks_order():
+    from scipy.spatial.transform import Rotation
+
+    from visloc.io.mavlink import _quaternion
+
+    for R in Rotation.random(500, random_state=2).as_matrix():
+        x, y, z, w = Rotation.from_matrix(R).as_quat()
+        want = np.array([w, x, y, z]) * (1 if w >= 0 else -1)
+        assert np.allclose(_quaternion(R), want, atol=1e-12)
+
+
+def test_map_frames_turn_into_ned():
+    p = np.array([1.0, 2.0, 3.0])  # 1 m along x, 2 along y, 3 up
+    assert MAP_FRAMES["nwu"] @ p == pytest.approx([1.0, -2.0, -3.0])
+    assert MAP_FRAMES["enu"] @ p == pytest.approx([2.0, 1.0, -3.0])
+    # a downward camera over a nwu map, image top toward north: the body is level, facing north
+    R_map_cam = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+    assert body_attitude_ned(R_map_cam, "nwu") == pytest.approx(np.eye(3))
+    with pytest.raises(ValueError, match="map_frame"):
+        body_attitude_ned(R_map_cam, "xyz")
+
+
+def test_localize_sends_every_fix_as_the_csv_says(tmp_path):
+    src = tmp_path / "flight"
+    assert main(["render", "localize", str(src), "--seconds", "2.2", "--fps", "10", "--seed", "4"]) == 0
+    port = _free_port()
+    rx = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", dialect="common")
+    out = tmp_path / "est.csv"
+    assert main(["localize", str(src), "--camera", str(src / "camera.yml"), "--map", str(src / "map.yml"),
+                 "--out", str(out), "--fps", "10", "--mavlink", f"udpout:127.0.0.1:{port}", "--quiet"]) == 0
+    msgs = _receive(rx)
+    rx.close()
+    rows = list(csv.DictReader(out.open()))
+    used = [r for r in rows if r["fix"] == "used"]
+    vpe = [m for m in msgs if m.get_type() == "VISION_POSITION_ESTIMATE"]
+    beats = [m for m in msgs if m.get_type() == "HEARTBEAT"]
+    assert len(used) >= 20 and len(vpe) == len(used)
+    assert len(beats) == 3  # one per second of frame time over 0 .. 2.1 s
+    F = MAP_FRAMES["nwu"]
+    for m, r in zip(vpe, used, strict=True):
+        assert m.usec == round(float(r["time"]) * 1e6)
+        ned = F @ np.array([float(r["x"]), float(r["y"]), float(r["z"])])
+        assert (m.x, m.y, m.z) == pytest.approx(ned, abs=1e-5)  # float32 on the wire
+        assert m.covariance[0] == pytest.approx(float(r["std_x"]) ** 2, rel=1e-4)
+        assert math.isnan(m.covariance[15])  # attitude variances: unknown
+        # the drone of `render localize` flies level-ish: roll and pitch small
+        assert abs(m.roll) < 0.3 and abs(m.pitch) < 0.3
+
+
+def test_missing_pymavlink_is_one_clear_line(tmp_path, monkeypatch, capsys):
+    import builtins
+
+    real = builtins.__import__
+
+    def no_pymavlink(name, *a, **k):
+        if name.startswith("pymavlink"):
+            raise ImportError(name)
+        return real(name, *a, **k)
+
+    src = tmp_path / "flight"
+    assert main(["render", "localize", str(src), "--seconds", "0.1", "--fps", "10"]) == 0
+    monkeypatch.setattr(builtins, "__import__", no_pymavlink)
+    code = main(["localize", str(src), "--camera", str(src / "camera.yml"), "--map", str(src / "map.yml"),
+                 "--fps", "10", "--mavlink", "--quiet"])
+    assert code == 2 and "pip install 'visloc[mavlink]'" in capsys.readouterr().err

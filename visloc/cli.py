@@ -264,6 +264,7 @@ def _add_track(sub: argparse._SubParsersAction) -> None:
     tk.add_argument("--fps", type=_positive, help="frame rate (required for image folders: the observer needs frame times)")
     tk.add_argument("--poles", type=float, nargs=2, default=(-4.0, -4.0), metavar="P",
                     help="velocity observer poles, 1/s (report eq. 3.14; default -4 -4)")
+    _mavlink_options(tk, "the body's pose as VISION_POSITION_ESTIMATE (the reference map is the local frame)")
     _detection_tail(tk)
 
 

@@ -2,6 +2,7 @@
 receiver on a loopback port decodes what visloc sends."""
 
 import csv
+import json
 import math
 import socket
 
@@ -120,3 +121,41 @@ def test_missing_pymavlink_is_one_clear_line(tmp_path, monkeypatch, capsys):
     code = main(["localize", str(src), "--camera", str(src / "camera.yml"), "--map", str(src / "map.yml"),
                  "--fps", "10", "--mavlink", "--quiet"])
     assert code == 2 and "pip install 'visloc[mavlink]'" in capsys.readouterr().err
+
+
+def test_track_sends_the_bodys_pose_in_ned(tmp_path):
+    import cv2
+    from scipy.spatial.transform import Rotation
+
+    from tests.pose.test_relative import BODY, REFERENCE, SIZE, two_map_scene
+    from visloc.synth import default_camera, write_camera_yml
+    from visloc.types import Pose
+
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    truth = []
+    for k in range(3):
+        T = Pose(Rotation.from_euler("z", 10 + 5 * k, degrees=True).as_matrix(), np.array([0.5 + 0.02 * k, -0.3, 0.6]))
+        cv2.imwrite(str(frames / f"f{k}.png"), two_map_scene(T, seed=k).image)
+        truth.append(T)
+    BODY.to_file(tmp_path / "body.yml")
+    REFERENCE.to_file(tmp_path / "ref.yml")
+    write_camera_yml(tmp_path / "cam.yml", default_camera(SIZE), SIZE)
+    port = _free_port()
+    rx = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", dialect="common")
+    out = tmp_path / "track.jsonl"
+    assert main(["track", str(frames), "--camera", str(tmp_path / "cam.yml"), "--body", str(tmp_path / "body.yml"),
+                 "--reference", str(tmp_path / "ref.yml"), "--fps", "30", "--mavlink", f"udpout:127.0.0.1:{port}",
+                 "--map-frame", "enu", "--out", str(out), "--quiet"]) == 0
+    vpe = [m for m in _receive(rx) if m.get_type() == "VISION_POSITION_ESTIMATE"]
+    rx.close()
+    recs = [json.loads(x) for x in out.read_text().splitlines()]
+    assert len(vpe) == 3 == len(recs)
+    for m, T, r in zip(vpe, truth, recs, strict=True):
+        assert (m.x, m.y, m.z) == pytest.approx(MAP_FRAMES["enu"] @ T.t, abs=0.01)  # enu: north = map y
+        assert m.usec == round(r["time"] * 1e6)
+        # the JSON's angles (map enu, body x forward, y left, z up) in NED/FRD: roll kept, pitch
+        # (nose up) of opposite sign, yaw from north clockwise = 90 deg - yaw from east
+        roll, pitch, yaw = r["euler_zyx_rad"]
+        assert (m.roll, m.pitch, m.yaw) == pytest.approx((roll, -pitch, np.pi / 2 - yaw), abs=1e-5)
+        assert yaw == pytest.approx(np.radians(10 + 5 * recs.index(r)), abs=np.radians(0.5))

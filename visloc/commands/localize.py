@@ -203,6 +203,18 @@ def _send_fix(link, args: argparse.Namespace, fusion, R_map_cam: np.ndarray, t: 
                                   reset_counter=kf.resets)
 
 
+def _send_body(link, map_frame: str, bp, t: float) -> None:
+    """A tracked body's pose to the flight stack (``track --mavlink``): the report's ceiling
+    camera sending the drone its own position. The body's marker map has x forward, y left,
+    z up (``visloc.io.mavlink``); its attitude goes out as FRD in NED."""
+    from visloc.io.mavlink import MAP_FRAMES
+    from visloc.pose.rotations import matrix_to_euler
+
+    F = MAP_FRAMES[map_frame]
+    R = F @ bp.T_ref_body.R @ np.diag([1.0, -1.0, -1.0])  # FRD body axes -> FLU marker axes -> map -> NED
+    link.send_vision_position(t, F @ bp.position, matrix_to_euler(R))
+
+
 def track(args: argparse.Namespace) -> int:
     """``visloc track``: pose of a body relative to reference markers, per frame, with an
     observer velocity (report eq. 3.14), as JSON lines and optionally UDP datagrams.
@@ -221,6 +233,7 @@ def track(args: argparse.Namespace) -> int:
     import socket
 
     from visloc.estimation import LuenbergerObserver
+    from visloc.io.mavlink import MavlinkSink
     from visloc.pose.maps import MarkerMap
     from visloc.pose.relative import track_body
 
@@ -242,6 +255,7 @@ def track(args: argparse.Namespace) -> int:
         source = open_timed_source(stack, args)
         out = stack.enter_context(JsonlWriter(args.out)) if args.out else None
         sock = stack.enter_context(socket.socket(socket.AF_INET, socket.SOCK_DGRAM)) if target else None
+        link = stack.enter_context(MavlinkSink(args.mavlink)) if getattr(args, "mavlink", None) else None
         warned = [False]
         for frame in frames_of(source, args):
             n_frames += 1
@@ -276,6 +290,8 @@ def track(args: argparse.Namespace) -> int:
                 out.write(rec)
             if sock is not None:
                 sock.sendto(json.dumps(rec).encode(), target)
+            if link is not None and "x" in rec:
+                _send_body(link, args.map_frame, bp, frame.time)
     if not args.quiet:
         print(f"visloc track: {n_frames} frames, {lost} without both maps, {failed} unreadable", file=sys.stderr)
     return 1 if failed else 0

@@ -134,6 +134,10 @@ def _add_detect(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--rerun", metavar="FILE.rrd", help="write a rerun recording")
     d.add_argument("--explain", metavar="DIR", help="write every detector stage's picture per frame")
     d.add_argument("--fps", type=_positive, help="frame rate for image lists (frame times)")
+    d.add_argument("--mavlink", nargs="?", const="udpout:127.0.0.1:14550", metavar="URL",
+                   help="send the --target-id marker as LANDING_TARGET (precision landing) to a flight stack: a "
+                        "pymavlink connection string (default udpout:127.0.0.1:14550; needs visloc[mavlink])")
+    d.add_argument("--target-id", type=int, metavar="N", help="the landing pad's marker id (with --mavlink)")
     _detection_tail(d)
 
 

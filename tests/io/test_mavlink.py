@@ -159,3 +159,41 @@ def test_track_sends_the_bodys_pose_in_ned(tmp_path):
         roll, pitch, yaw = r["euler_zyx_rad"]
         assert (m.roll, m.pitch, m.yaw) == pytest.approx((roll, -pitch, np.pi / 2 - yaw), abs=1e-5)
         assert yaw == pytest.approx(np.radians(10 + 5 * recs.index(r)), abs=np.radians(0.5))
+
+
+def test_detect_sends_the_pad_as_landing_target(tmp_path, capsys):
+    from visloc.io.mavlink import DOWN_CAMERA
+
+    import cv2
+
+    from visloc.markers import MarkerDetector
+    from visloc.pose.maps import MarkerMap
+
+    src = tmp_path / "flight"  # a downward camera over a marker grid: the same ids frame after frame
+    assert main(["render", "localize", str(src), "--seconds", "0.4", "--fps", "10", "--seed", "2"]) == 0
+    grid = MarkerMap.from_file(src / "map.yml")
+    side = float(np.linalg.norm(np.diff(grid.corners_of(int(grid.ids[0]))[:2], axis=0)))
+    pad = MarkerDetector("DICT_4X4_100").detect(cv2.imread(str(min(src.glob("frame_*.png")))))[0].id
+    port = _free_port()
+    rx = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", dialect="common")
+    out = tmp_path / "det.jsonl"
+    base = ["detect", str(src), "--dict", "DICT_4X4_100", "--camera", str(src / "camera.yml"), "--marker-length",
+            f"{side}", "--fps", "10"]
+    assert main([*base, "--out", str(out), "--mavlink", f"udpout:127.0.0.1:{port}", "--target-id", str(pad),
+                 "--quiet"]) == 0
+    msgs = [m for m in _receive(rx) if m.get_type() == "LANDING_TARGET"]
+    rx.close()
+    frames = [json.loads(x) for x in out.read_text().splitlines()]
+    views = [(f, next(m for m in f["markers"] if m["id"] == pad)) for f in frames
+             if any(m["id"] == pad for m in f["markers"])]
+    assert len(views) >= 2 and len(msgs) == len(views)
+    for msg, (f, m) in zip(msgs, views, strict=True):
+        t = np.array(m["tvec"])
+        assert msg.time_usec == round(f["time"] * 1e6) and msg.target_num == pad and msg.position_valid == 1
+        assert msg.angle_x == pytest.approx(np.arctan2(t[0], t[2]), abs=1e-5)
+        assert msg.angle_y == pytest.approx(np.arctan2(t[1], t[2]), abs=1e-5)
+        assert msg.distance == pytest.approx(np.linalg.norm(t), rel=1e-5)
+        assert (msg.x, msg.y, msg.z) == pytest.approx(DOWN_CAMERA @ t, abs=1e-5)
+        assert msg.size_x == pytest.approx(2 * np.arctan(side / 2 / np.linalg.norm(t)), rel=1e-4)
+    assert main([*base, "--mavlink"]) == 2  # which marker is the pad?
+    assert "--target-id" in capsys.readouterr().err

@@ -44,6 +44,8 @@ def detect(args: argparse.Namespace) -> int:
     camera = Camera.from_file(args.camera) if args.camera else None
     if (camera is None) != (args.marker_length is None):
         raise UsageError("poses need both --camera FILE and --marker-length M")
+    if getattr(args, "mavlink", None) and (camera is None or args.target_id is None):
+        raise UsageError("--mavlink sends LANDING_TARGET: it needs --camera, --marker-length and --target-id")
     failed = n_frames = n_markers = 0
     times: list[float] = []
     warned = [False]
@@ -52,6 +54,11 @@ def detect(args: argparse.Namespace) -> int:
         out = stack.enter_context(JsonlWriter(args.out)) if args.out else None
         sink = stack.enter_context(AnnotationSink(args.annotate)) if args.annotate else None
         rec = stack.enter_context(RerunLogger(args.rerun)) if args.rerun else None
+        link = None
+        if getattr(args, "mavlink", None):
+            from visloc.io.mavlink import MavlinkSink
+
+            link = stack.enter_context(MavlinkSink(args.mavlink))
         explain_dir = Path(args.explain) if args.explain else None
         for frame in frames_of(source, args):
             n_frames += 1
@@ -84,6 +91,11 @@ def detect(args: argparse.Namespace) -> int:
                 sink.write(draw_markers(frame.image, dets, poses, cam, args.marker_length), frame.name)
             if rec:
                 rec.log_frame(frame.index, frame.time, frame.image, dets, poses, cam, args.marker_length)
+            if link is not None:
+                pads = [p for d, p in zip(dets, poses or [], strict=False) if d.id == args.target_id and p is not None]
+                if pads:  # the best-fitting view of the pad
+                    pad = min(pads, key=lambda p: p.reprojection_rms)
+                    link.send_landing_target(frame.time, pad.t, args.marker_length, target_num=args.target_id)
     if not args.quiet:
         ms = f", median {1e3 * float(np.median(times)):.1f} ms per frame" if times else ""
         print(f"visloc detect: {n_frames} frames, {n_markers} markers, {failed} unreadable{ms}", file=sys.stderr)

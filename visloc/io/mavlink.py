@@ -287,6 +287,43 @@ class MavlinkSink:
             _upper_triangle(velocity_covariance), int(reset_counter) % 256, m.MAV_ESTIMATOR_TYPE_VISION,
             int(max(0, min(100, quality)))))
 
+    def send_landing_target(self, time_s: float, position_cam: ArrayLike, size_m: float, *, target_num: int = 0,
+                            R_body_cam: ArrayLike = DOWN_CAMERA) -> None:
+        """``LANDING_TARGET``: a marker pad seen by the camera, for precision landing.
+
+        Parameters
+        ----------
+        time_s : float
+            The frame's time, s.
+        position_cam : array_like (3,)
+            The marker's centre in the camera frame (x right, y down, z along the optical
+            axis), m (``Pose.t`` of its pose).
+        size_m : float
+            The marker's side, m (sent as its angular size).
+        target_num : int
+            The target's number (0-255; visloc sends the marker id's low byte).
+        R_body_cam : array_like (3, 3)
+            Camera axes to body FRD axes (default :data:`DOWN_CAMERA`).
+
+        Notes
+        -----
+        ``angle_x``/``angle_y`` are the target's angles from the optical axis along the image's
+        x and y (rad; what ArduPilot's precision landing reads), ``distance`` its range;
+        ``x, y, z`` its position in the body FRD frame (``MAV_FRAME_BODY_FRD``, ``position_valid``
+        1; what PX4's landing-target estimator reads).
+        """
+        p = np.asarray(position_cam, float).reshape(3)
+        if not np.isfinite(p).all() or p[2] <= 0:
+            raise ValueError(f"position_cam must be finite and in front of the camera, got {p.tolist()}")
+        m = self._mav
+        dist = float(np.linalg.norm(p))
+        size = 2.0 * math.atan2(0.5 * float(size_m), dist)
+        body = (np.asarray(R_body_cam, float) @ p).tolist()
+        self.heartbeat(time_s)
+        self._send(m.MAVLink_landing_target_message(
+            _usec(time_s), int(target_num) % 256, m.MAV_FRAME_BODY_FRD, math.atan2(p[0], p[2]), math.atan2(p[1], p[2]),
+            dist, size, size, *body, [1.0, 0.0, 0.0, 0.0], m.LANDING_TARGET_TYPE_VISION_FIDUCIAL, 1))
+
     def close(self) -> None:
         """Send what is queued and close the link."""
         if self._thread is not None and self._queue is not None:

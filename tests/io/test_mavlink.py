@@ -162,10 +162,9 @@ def test_track_sends_the_bodys_pose_in_ned(tmp_path):
 
 
 def test_detect_sends_the_pad_as_landing_target(tmp_path, capsys):
-    from visloc.io.mavlink import DOWN_CAMERA
-
     import cv2
 
+    from visloc.io.mavlink import DOWN_CAMERA
     from visloc.markers import MarkerDetector
     from visloc.pose.maps import MarkerMap
 

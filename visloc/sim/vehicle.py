@@ -21,7 +21,7 @@ from visloc.control._checks import as_array, check_params, check_real, resolve_a
 from visloc.control.robustness import max_sigma
 from visloc.model.params import ARDRONE2, ARDrone2Params
 from visloc.model.propulsion import mixer_matrix, pwm_bar
-from visloc.model.rigid_body import rhs, rotation_matrix
+from visloc.model.rigid_body import rhs_values, rotation_matrix
 from visloc.types import FloatArray
 
 __all__ = ["Vehicle", "motor_coefficients"]
@@ -119,10 +119,14 @@ class Vehicle:
         self.gyroscopic = gyroscopic
         self.pwm_max = check_real(pwm_max, "pwm_max", positive=True)
         self.inertia = np.array([p.Ixx, p.Iyy, p.Izz])
+        self._inertia = self.inertia.tolist()
         self.state = np.zeros(12) if state is None else as_array(state, "state", (12,)).copy()
         self.time = 0.0
         self.pwm = np.zeros(4)
         self._bar = np.zeros(4)  # lagged (pwm + k)^2 of each motor, %^2
+        self._last_key: bytes | None = None  # the last command's bytes, its (pwm + k)^2 and inputs
+        self._target = self._bar
+        self._u = [0.0] * 4
 
     @property
     def inputs(self) -> FloatArray:
@@ -139,9 +143,15 @@ class Vehicle:
         return self._f(self.state, self.inputs, force)[3:6]
 
     def _f(self, s: FloatArray, u: FloatArray, force: FloatArray | None) -> FloatArray:
-        out = rhs(s, u, self.params.mass, self.params.g, self.inertia, gyroscopic=self.gyroscopic)
+        return np.array(self._values(s.tolist(), u.tolist(), None if force is None else force.tolist()))
+
+    def _values(self, s: list[float], u: list[float], force: list[float] | None) -> list[float]:
+        """The state's derivative on floats (:func:`visloc.model.rigid_body.rhs_values`) with
+        the external force's acceleration added."""
+        m = self.params.mass
+        out = rhs_values(s, u, m, self.params.g, self._inertia, gyroscopic=self.gyroscopic)
         if force is not None:
-            out[3:6] += force / self.params.mass
+            out[3], out[4], out[5] = out[3] + force[0] / m, out[4] + force[1] / m, out[5] + force[2] / m
         return out
 
     def step(self, pwm: ArrayLike, dt: float, force: ArrayLike | None = None) -> FloatArray:
@@ -168,26 +178,35 @@ class Vehicle:
             diverged; the caller reports it).
         """
         h = check_real(dt, "dt", positive=True)
-        cmd = np.clip(as_array(pwm, "pwm", (4,)), 0.0, self.pwm_max)
-        f = None if force is None else as_array(force, "force", (3,))
-        target = pwm_bar(cmd, self.params.k)  # report eqs. (2.17)-(2.18)
+        key = pwm.tobytes() if isinstance(pwm, np.ndarray) else None
+        if key is None or key != self._last_key:  # a new command (the substeps of a control step repeat it)
+            cmd = np.clip(as_array(pwm, "pwm", (4,)), 0.0, self.pwm_max)
+            self._last_key, self._target = key, pwm_bar(cmd, self.params.k)  # report eqs. (2.17)-(2.18)
+            self.pwm = cmd
+        target = self._target
         if self.motor_lag > 0.0:  # report eq. (2.13), solved exactly over the step
             self._bar = target + (self._bar - target) * math.exp(-h / self.motor_lag)
+            u = self.inputs.tolist()
         else:
-            self._bar = target
-        self.pwm = cmd
-        u = self.inputs
-        s = self.state
-        with np.errstate(over="ignore", invalid="ignore"):  # checked just below
-            k1 = self._f(s, u, f)
-            k2 = self._f(s + 0.5 * h * k1, u, f)
-            k3 = self._f(s + 0.5 * h * k2, u, f)
-            k4 = self._f(s + h * k3, u, f)
-            new = s + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-        if not np.all(np.isfinite(new)) or abs(math.cos(new[7])) < 1e-6:
+            if self._bar is not target:
+                self._bar = target
+                self._u = self.inputs.tolist()
+            u = self._u
+        fl = None if force is None else as_array(force, "force", (3,)).tolist()
+        s = self.state.tolist()
+        half, sixth = 0.5 * h, h / 6.0
+        try:  # classic RK4 on floats (the same operations, in the same order, as on arrays)
+            k1 = self._values(s, u, fl)
+            k2 = self._values([a + half * b for a, b in zip(s, k1, strict=True)], u, fl)
+            k3 = self._values([a + half * b for a, b in zip(s, k2, strict=True)], u, fl)
+            k4 = self._values([a + h * b for a, b in zip(s, k3, strict=True)], u, fl)
+            new = [a + sixth * (((b + 2.0 * c) + 2.0 * d) + e) for a, b, c, d, e in zip(s, k1, k2, k3, k4, strict=True)]
+        except (OverflowError, ValueError, ZeroDivisionError):  # math's functions on a state gone bad
+            new = [math.nan] * 12
+        if not all(math.isfinite(v) for v in new) or abs(math.cos(new[7])) < 1e-6:
             raise FloatingPointError(f"state not finite or at the pitch singularity at "
-                                     f"t = {self.time + h:.3f} s: {new!r}")
-        self.state = new
+                                     f"t = {self.time + h:.3f} s: {np.array(new)!r}")
+        self.state = np.array(new)
         self.time += h
         return new
 

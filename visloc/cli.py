@@ -117,13 +117,15 @@ def build_parser() -> argparse.ArgumentParser:
     _add_robust(sub)
     _add_sim(sub)
     _add_demo(sub)
+    _add_info(sub)
     return parser
 
 
 def _add_detect(sub: argparse._SubParsersAction) -> None:
     """The ``visloc detect`` sub-command's arguments."""
     d = sub.add_parser("detect", help="detect markers (and poses) in images, folders, videos or a camera")
-    d.add_argument("source", help="image, folder, glob pattern, video file or camera index")
+    d.add_argument("source", help="image, folder, glob pattern, video file, ROS bag / MCAP or camera index")
+    _topic(d)
     d.add_argument("--dict", default="DICT_4X4_50", metavar="NAME|FILE",
                    help="OpenCV dictionary name or dictionary YAML file (default: DICT_4X4_50)")
     d.add_argument("--camera", metavar="FILE", help="camera file (OpenCV YAML) for poses")
@@ -191,7 +193,8 @@ def _add_render(sub: argparse._SubParsersAction) -> None:
 def _add_calibrate(sub: argparse._SubParsersAction) -> None:
     """The ``visloc calibrate`` sub-command's arguments."""
     cb = sub.add_parser("calibrate", help="a camera file from views of a ChArUco board (cv2.calibrateCamera)")
-    cb.add_argument("source", help="image folder, glob pattern or video file of the board")
+    cb.add_argument("source", help="image folder, glob pattern, video file or ROS bag / MCAP of the board")
+    _topic(cb)
     cb.add_argument("--board", required=True, metavar="BOARD.yml", help="board file (see visloc render board)")
     cb.add_argument("--out", required=True, metavar="CAMERA.yml", help="camera file to write (OpenCV YAML)")
     cb.add_argument("--model", default="k1k2p1p2k3", choices=("pinhole-k1k2", "k1k2p1p2k3", "rational"),
@@ -210,7 +213,8 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
 def _add_flow(sub: argparse._SubParsersAction) -> None:
     """The ``visloc flow`` sub-command's arguments."""
     fl = sub.add_parser("flow", help="ground velocity of a downward camera from its frames (block flow)")
-    fl.add_argument("source", help="folder, glob pattern, video file or camera index")
+    fl.add_argument("source", help="folder, glob pattern, video file, ROS bag / MCAP or camera index")
+    _topic(fl)
     fl.add_argument("--camera", required=True, metavar="FILE", help="camera file (OpenCV YAML)")
     hg = fl.add_mutually_exclusive_group(required=True)
     hg.add_argument("--height", type=_positive, metavar="H", help="height above the ground, m")
@@ -235,7 +239,10 @@ def _add_localize(sub: argparse._SubParsersAction) -> None:
     lz.add_argument("--fps", type=_positive, help="frame rate (required for image folders)")
     lz.add_argument("--accel-noise", type=_positive, default=2.0, metavar="A",
                     help="Kalman process noise: white acceleration std, m/s^2 (default 2)")
-    lz.add_argument("--imu", metavar="FILE.csv", help="IMU log (t,gx,gy,gz,fx,fy,fz; specific force in camera axes)")
+    imu = lz.add_mutually_exclusive_group()
+    imu.add_argument("--imu", metavar="FILE.csv", help="IMU log (t,gx,gy,gz,fx,fy,fz; specific force in camera axes)")
+    imu.add_argument("--imu-topic", metavar="TOPIC", help="the sensor_msgs/Imu topic of a ROS bag or MCAP source "
+                                                         "(its axes taken as the camera's)")
     lz.add_argument("--truth", metavar="FILE.csv", help="ground truth (t,x,y,z columns) to compare with")
     lz.add_argument("--out", metavar="FILE.csv", help="write one row per frame")
     lz.add_argument("--rerun", metavar="FILE.rrd", help="write a rerun recording (estimate vs truth)")
@@ -270,6 +277,13 @@ def _add_track(sub: argparse._SubParsersAction) -> None:
                     help="velocity observer poles, 1/s (report eq. 3.14; default -4 -4)")
     _mavlink_options(tk, "the body's pose as VISION_POSITION_ESTIMATE (the reference map is the local frame)")
     _detection_tail(tk)
+
+
+def _add_info(sub: argparse._SubParsersAction) -> None:
+    """The ``visloc info`` sub-command's arguments."""
+    inf = sub.add_parser("info", help="what a source holds: a recording's topics, a video's or folder's frames")
+    inf.add_argument("source", help="ROS bag / MCAP, video file, image, folder or glob pattern")
+    inf.add_argument("--json", action="store_true", help="print JSON instead of a table")
 
 
 def _add_model(sub: argparse._SubParsersAction) -> None:
@@ -321,8 +335,15 @@ def _add_demo(sub: argparse._SubParsersAction) -> None:
 
 def _source_and_camera(p: argparse.ArgumentParser) -> None:
     """The frame source and the required camera file of ``localize`` and ``track``."""
-    p.add_argument("source", help="image, folder, glob pattern, video file or camera index")
+    p.add_argument("source", help="image, folder, glob pattern, video file, ROS bag / MCAP or camera index")
+    _topic(p)
     p.add_argument("--camera", required=True, metavar="FILE", help="camera file (OpenCV YAML)")
+
+
+def _topic(p: argparse.ArgumentParser) -> None:
+    """``--topic``: a recording's image topic."""
+    p.add_argument("--topic", metavar="TOPIC", help="the image topic of a ROS bag or MCAP source (sensor_msgs/Image "
+                                                   "or CompressedImage; needed when it has several; needs visloc[ros])")
 
 
 def _detection_tail(p: argparse.ArgumentParser) -> None:
@@ -346,7 +367,7 @@ def _detector_arguments(p: argparse.ArgumentParser) -> None:
 _COMMANDS = {"detect": ("markers", "detect"), "render": ("markers", "render"), "demo": ("demo", "demo"),
              "flow": ("flow", "flow"), "track": ("localize", "track"), "localize": ("localize", "localize"),
              "model": ("model", "model"), "robust": ("robust", "robust"), "sim": ("sim", "sim"),
-             "calibrate": ("calibrate", "calibrate_camera")}
+             "calibrate": ("calibrate", "calibrate_camera"), "info": ("info", "info")}
 
 #: options naming files or folders a command reads, and those it writes
 _INPUTS = ("source", "camera", "map", "height_csv", "imu", "truth", "dict", "body", "reference", "board")

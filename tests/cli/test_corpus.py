@@ -50,6 +50,7 @@ def corpus(tmp_path_factory):
     _video(root / "corrupt.avi", [cv2.imread(str(f)) for f in frames] * 4, corrupt=True)
     (root / "garbage.yml").write_bytes(bytes(np.random.default_rng(0).integers(0, 256, 300, np.uint8)))
     (root / "empty.yml").write_text("")
+    (root / "garbage.bag").write_bytes(bytes(np.random.default_rng(1).integers(0, 256, 500, np.uint8)))
     (root / "dict99.yml").write_text("%YAML:1.0\n---\nnmarkers: 2\nmarkersize: 4\nmaxCorrectionBits: 99\n"
                                      "marker_0: \"1010010110100101\"\nmarker_1: \"0110100101101001\"\n")
     heights = (flow / "heights.csv").read_text().splitlines()
@@ -117,6 +118,10 @@ CASES = {
     "render-board-garbage": ("render board {c}/garbage.yml {o}/b.png", {2}, [], "garbage.yml"),
     "render-markers-zero-size": ("render markers {o}/r --size 0x0", {2}, [], "size"),
     "model": ("model --json", {0}, [], ""),
+    "info-folder": ("info {c}/good --json", {0}, [], ""),
+    "info-garbage-bag": ("info {c}/garbage.bag", {2}, [], "garbage.bag"),
+    "detect-garbage-bag": ("detect {c}/garbage.bag", {2}, [], "garbage.bag"),
+    "detect-topic-for-a-folder": ("detect {c}/good --topic /camera/image", {2}, [], "topic"),
     "robust-nan-sigma": ("robust --sigma nan", {2}, [], "sigma"),
     "sim-huge": ("sim hover --seconds 1e8", {2}, [], "seconds"),
     "sim-plot-under-a-file": ("sim hover --seconds 0.5 --plot {c}/good/map.yml/p.png", {2}, [], "plot"),

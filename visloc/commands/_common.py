@@ -95,7 +95,7 @@ def open_timed_source(stack, args: argparse.Namespace):
     from visloc.errors import UsageError
     from visloc.io import ImageListSource, open_source
 
-    source = stack.enter_context(open_source(args.source, fps=args.fps))
+    source = stack.enter_context(open_source(args.source, fps=args.fps, topic=args.topic))
     if isinstance(source, ImageListSource) and args.fps is None:
         raise UsageError("image folders and globs need --fps (the time between frames)")
     return source

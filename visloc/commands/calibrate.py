@@ -51,7 +51,7 @@ def calibrate_camera(args: argparse.Namespace) -> int:
     board = _board(args.board)
     views, names, size, failed = [], [], None, 0
     with ExitStack() as stack:
-        source = stack.enter_context(open_source(args.source, fps=None))
+        source = stack.enter_context(open_source(args.source, fps=None, topic=args.topic))
         for n, frame in enumerate(frames_of(source, args)):
             if n % args.every:
                 continue

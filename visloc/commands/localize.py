@@ -115,6 +115,14 @@ def localize(args: argparse.Namespace) -> int:
         truth = dict(zip(("t", "x", "y", "z"), _finite_rows(args.truth, "--truth", ("t", "x", "y", "z")).T,
                          strict=True))
     imu = _read_imu(args.imu) if args.imu else None
+    if getattr(args, "imu_topic", None):
+        from visloc.io.bags import is_recording, read_bag_imu
+
+        if not is_recording(args.source):
+            raise UsageError(f"--imu-topic reads a ROS bag or MCAP source; {args.source} is not one")
+        imu = read_bag_imu(args.source, topic=args.imu_topic, image_topic=args.topic)[:, [0, 4, 5, 6]]
+        if len(imu) == 0:
+            raise UsageError(f"--imu-topic {args.imu_topic}: no IMU messages")
     fusion = MapFixFusion(accel_noise=args.accel_noise)  # the map's z axis points up: gravity (0, 0, -9.81)
     R_map_cam = None
     last_t = None
@@ -170,7 +178,7 @@ def localize(args: argparse.Namespace) -> int:
             if rec:
                 rec.log_localize(frame.index, frame.time, frame.image, pos, true_pos)
     if imu is not None and len(frame_times) > 1 and imu_used == 0:
-        warn("localize", f"--imu {args.imu}: its times {imu[0, 0]:g} .. {imu[-1, 0]:g} s do not overlap the frames' "
+        warn("localize", f"--imu {args.imu or args.imu_topic}: its times {imu[0, 0]:g} .. {imu[-1, 0]:g} s do not overlap the frames' "
                          f"{frame_times[0]:g} .. {frame_times[-1]:g} s (or no frame had a fix to turn it into the "
                          "map frame): the IMU was not used")
     if not args.quiet:

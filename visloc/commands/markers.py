@@ -50,7 +50,7 @@ def detect(args: argparse.Namespace) -> int:
     times: list[float] = []
     warned = [False]
     with ExitStack() as stack:
-        source = stack.enter_context(open_source(args.source, fps=args.fps))
+        source = stack.enter_context(open_source(args.source, fps=args.fps, topic=args.topic))
         out = stack.enter_context(JsonlWriter(args.out)) if args.out else None
         sink = stack.enter_context(AnnotationSink(args.annotate)) if args.annotate else None
         rec = stack.enter_context(RerunLogger(args.rerun)) if args.rerun else None

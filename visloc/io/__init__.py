@@ -8,11 +8,15 @@ Writers
     (video or PNG folder), :func:`draw_markers`.
 Visualisation
     :class:`RerunLogger` writes a rerun ``.rrd`` recording.
+Recordings
+    :class:`BagSource`: the images of a ROS 1 / ROS 2 bag or an MCAP file (``visloc.io.bags``;
+    rosbags, the extra ``visloc[ros]``); :func:`visloc.io.bags.read_bag_imu` its IMU.
 Drone links
     :class:`MavlinkSink` sends estimates to PX4 / ArduPilot as MAVLink messages
     (``visloc.io.mavlink``; pymavlink, the extra ``visloc[mavlink]``).
 """
 
+from visloc.io.bags import BagSource
 from visloc.io.draw import draw_markers
 from visloc.io.mavlink import MavlinkSink
 from visloc.io.rerun_log import RerunLogger
@@ -33,6 +37,7 @@ __all__ = [
     "IMAGE_EXTENSIONS",
     "VIDEO_EXTENSIONS",
     "AnnotationSink",
+    "BagSource",
     "CameraSource",
     "CsvWriter",
     "FrameSource",

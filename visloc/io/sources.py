@@ -369,18 +369,22 @@ def _image_list(spec: str, paths: list[str], kind: str, fps: float | None) -> Im
     return ImageListSource(images, fps=fps, description=f"{kind} {spec} ({len(images)} {noun})")
 
 
-def open_source(spec: str | int | os.PathLike[str], *, fps: float | None = None) -> FrameSource:
-    """Open a frame source from a path, glob pattern, video file or camera index.
+def open_source(spec: str | int | os.PathLike[str], *, fps: float | None = None,
+                topic: str | None = None) -> FrameSource:
+    """Open a frame source from a path, glob pattern, video file, recording or camera index.
 
     ``spec`` is interpreted in this order:
 
     1. an ``int``, or a string of digits such as ``"0"``: a camera index (write ``"./0"`` for
        a file or folder named ``0``);
-    2. an existing folder: its image files (non-recursive), sorted by name;
-    3. an existing file: a single image if its extension is an image extension
+    2. a recording: a ROS 1 ``.bag``, a ``.mcap`` file or a ROS 2 bag folder (one with
+       ``metadata.yaml``): the images of ``topic`` (:class:`visloc.io.bags.BagSource`, needs
+       the extra ``visloc[ros]``);
+    3. an existing folder: its image files (non-recursive), sorted by name;
+    4. an existing file: a single image if its extension is an image extension
        (:data:`IMAGE_EXTENSIONS`, case-insensitive), otherwise a video (any other extension
        is tried with ``cv2.VideoCapture`` too);
-    4. a string containing ``*``, ``?`` or ``[``: a glob pattern (``**`` recurses), keeping the
+    5. a string containing ``*``, ``?`` or ``[``: a glob pattern (``**`` recurses), keeping the
        matching image files sorted by path.
 
     Parameters
@@ -390,7 +394,10 @@ def open_source(spec: str | int | os.PathLike[str], *, fps: float | None = None)
     fps : float, optional
         Frame rate. For image lists ``time = index / fps``; without it ``time = index`` (one
         second per frame). For videos it overrides the container's timestamps. Cameras ignore
-        it (their time is the wall-clock time since the first frame).
+        it (their time is the wall-clock time since the first frame), and so do recordings
+        (their times are the messages' stamps).
+    topic : str, optional
+        A recording's image topic (needed when it has more than one); only for recordings.
 
     Returns
     -------
@@ -422,6 +429,12 @@ def open_source(spec: str | int | os.PathLike[str], *, fps: float | None = None)
         raise SourceError("spec is empty: expected a path, glob pattern or camera index")
     if text.strip().isdigit() and text.strip().isascii():
         return CameraSource(int(text.strip()))
+    from visloc.io.bags import BagSource, is_recording
+
+    if is_recording(text):
+        return BagSource(text, topic=topic)
+    if topic is not None:
+        raise SourceError(f"a topic ({topic}) is for ROS bags and MCAP files; {text} is not one")
     if os.path.isdir(text):
         names = [os.path.join(text, n) for n in os.listdir(text)]
         return _image_list(text, names, "folder", fps)

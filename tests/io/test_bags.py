@@ -1,0 +1,177 @@
+"""Recordings as sources (``visloc.io.bags``): ROS 1 bags, ROS 2 bags (SQLite and MCAP) and lone
+MCAP files written here with rosbags' own writers from a rendered flight and its IMU."""
+
+import csv
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from rosbags.rosbag1 import Writer as Ros1Writer
+from rosbags.rosbag2 import StoragePlugin
+from rosbags.rosbag2 import Writer as Ros2Writer
+from rosbags.typesys import Stores, get_typestore
+
+from visloc.cli import main
+from visloc.io import open_source
+from visloc.io.bags import BagSource, read_bag_imu, recording_topics
+from visloc.io.sources import SourceError
+from visloc.markers import MarkerDetector
+
+FPS = 10.0
+T0 = 1_700_000_000  # header stamps in epoch seconds, as a robot writes them
+
+
+def _stamp(store, t: float, ros1: bool, frame_id: str = "cam"):
+    ns = T0 * 1_000_000_000 + round(t * 1e9)  # integer ns: T0 + t in floats would lose 0.2 us
+    Time, Header = store.types["builtin_interfaces/msg/Time"], store.types["std_msgs/msg/Header"]
+    stamp = Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+    return Header(seq=0, stamp=stamp, frame_id=frame_id) if ros1 else Header(stamp=stamp, frame_id=frame_id)
+
+
+def _image_msg(store, img: np.ndarray, t: float, ros1: bool, kind: str):
+    header = _stamp(store, t, ros1)
+    if kind == "png":
+        data = np.frombuffer(cv2.imencode(".png", img)[1].tobytes(), np.uint8)
+        return store.types["sensor_msgs/msg/CompressedImage"](header=header, format="png", data=data)
+    if kind == "rgb8":
+        img = cv2.cvtColor(img, cv2.COLOR_GRAY2RGB)
+    h, w = img.shape[:2]
+    step = w * (3 if kind == "rgb8" else 1)
+    return store.types["sensor_msgs/msg/Image"](header=header, height=h, width=w, encoding=kind, is_bigendian=0,
+                                                 step=step, data=img.reshape(-1))
+
+
+def _imu_msg(store, row: np.ndarray, ros1: bool):
+    Vec, Quat = store.types["geometry_msgs/msg/Vector3"], store.types["geometry_msgs/msg/Quaternion"]
+    return store.types["sensor_msgs/msg/Imu"](
+        header=_stamp(store, float(row[0]), ros1, "imu"), orientation=Quat(x=0.0, y=0.0, z=0.0, w=1.0),
+        orientation_covariance=np.zeros(9), angular_velocity=Vec(x=row[1], y=row[2], z=row[3]),
+        angular_velocity_covariance=np.zeros(9), linear_acceleration=Vec(x=row[4], y=row[5], z=row[6]),
+        linear_acceleration_covariance=np.zeros(9))
+
+
+def write_recording(path: Path, frames: list[np.ndarray], imu: np.ndarray, *, fmt: str, kind: str) -> Path:
+    """A recording of ``frames`` (at FPS) on /camera/image and ``imu`` rows on /imu."""
+    ros1 = fmt == "ros1"
+    store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+    img_type = "sensor_msgs/msg/CompressedImage" if kind == "png" else "sensor_msgs/msg/Image"
+    if ros1:
+        writer = Ros1Writer(path)
+    else:
+        plugin = StoragePlugin.MCAP if fmt == "mcap" else StoragePlugin.SQLITE3
+        writer = Ros2Writer(path, version=9, storage_plugin=plugin)
+    serialize = store.serialize_ros1 if ros1 else store.serialize_cdr
+    with writer as w:
+        cam = w.add_connection("/camera/image", img_type, typestore=store)
+        imu_conn = w.add_connection("/imu", "sensor_msgs/msg/Imu", typestore=store)
+        events = [(k / FPS, 0, k) for k in range(len(frames))] + [(float(r[0]), 1, i) for i, r in enumerate(imu)]
+        for t, what, i in sorted(events):
+            log = T0 * 1_000_000_000 + round((t + 0.003) * 1e9)  # logged 3 ms after the stamp
+            if what == 0:
+                w.write(cam, log, serialize(_image_msg(store, frames[i], t, ros1, kind), img_type))
+            else:
+                w.write(imu_conn, log, serialize(_imu_msg(store, imu[i], ros1), "sensor_msgs/msg/Imu"))
+    return path
+
+
+@pytest.fixture(scope="module")
+def flight(tmp_path_factory):
+    root = tmp_path_factory.mktemp("bags")
+    src = root / "flight"
+    assert main(["render", "localize", str(src), "--seconds", "1.0", "--fps", str(FPS), "--seed", "6"]) == 0
+    frames = [cv2.imread(str(p), cv2.IMREAD_GRAYSCALE) for p in sorted(src.glob("frame_*.png"))]
+    imu = np.loadtxt(src / "imu.csv", delimiter=",", skiprows=1)
+    return root, src, frames, imu
+
+
+@pytest.mark.parametrize(("fmt", "kind"), [("ros1", "mono8"), ("ros2", "rgb8"), ("mcap", "png")])
+def test_every_frame_and_imu_sample_comes_back_in_order_with_its_stamp(flight, fmt, kind):
+    root, _, frames, imu = flight
+    path = write_recording(root / f"rec_{fmt}_{kind}{'.bag' if fmt == 'ros1' else ''}", frames, imu, fmt=fmt,
+                           kind=kind)
+    with open_source(path) as source:  # the only image topic: no --topic needed
+        got = list(source)
+        assert isinstance(source, BagSource) and len(source) == len(frames)
+    assert [f.index for f in got] == list(range(len(frames)))
+    assert [f.time for f in got] == pytest.approx([k / FPS for k in range(len(frames))], abs=1e-9)
+    for f, img in zip(got, frames, strict=True):
+        grey = f.image if f.image.ndim == 2 else cv2.cvtColor(f.image, cv2.COLOR_BGR2GRAY)
+        assert np.array_equal(grey, img)  # raw and PNG are lossless: the same pixels
+    back = read_bag_imu(path)
+    assert back[:, 1:] == pytest.approx(imu[:, 1:])
+    assert back[:, 0] == pytest.approx(imu[:, 0], abs=1e-9)  # the same origin as the frames
+
+
+def test_lone_mcap_file_and_topics_listing(flight):
+    root, _, frames, imu = flight
+    folder = write_recording(root / "lone", frames, imu, fmt="mcap", kind="mono8")
+    mcap = next(folder.glob("*.mcap"))
+    topics = {t["topic"]: t for t in recording_topics(mcap)}
+    assert topics["/camera/image"]["count"] == len(frames) and topics["/imu"]["type"] == "sensor_msgs/msg/Imu"
+    assert topics["/camera/image"]["rate_hz"] == pytest.approx(FPS, rel=1e-6)
+    with open_source(mcap, topic="/camera/image") as source:
+        assert sum(f.image is not None for f in source) == len(frames)
+    assert main(["info", str(mcap)]) == 0
+
+
+def test_compressed_and_raw_give_the_same_detections(flight):
+    root, _, frames, imu = flight
+    raw = write_recording(root / "raw.bag", frames, imu, fmt="ros1", kind="mono8")
+    png = write_recording(root / "png.bag", frames, imu, fmt="ros1", kind="png")
+    det = MarkerDetector("DICT_4X4_100")
+    with open_source(raw) as a, open_source(png) as b:
+        for fa, fb in zip(a, b, strict=True):
+            da, db = det.detect(fa.image), det.detect(fb.image)
+            assert [d.id for d in da] == [d.id for d in db] and len(da) > 0
+            assert all(np.array_equal(x.corners, y.corners) for x, y in zip(da, db, strict=True))
+
+
+def test_localize_on_a_bag_with_its_imu_matches_the_folder_and_csv(flight, tmp_path):
+    root, src, frames, imu = flight
+    bag = write_recording(root / "loc.bag", frames, imu, fmt="ros1", kind="mono8")
+    common = ["--camera", str(src / "camera.yml"), "--map", str(src / "map.yml"), "--quiet"]
+    assert main(["localize", str(bag), "--imu-topic", "/imu", "--out", str(tmp_path / "bag.csv"), *common]) == 0
+    assert main(["localize", str(src), "--fps", str(FPS), "--imu", str(src / "imu.csv"),
+                 "--out", str(tmp_path / "folder.csv"), *common]) == 0
+    a = list(csv.DictReader((tmp_path / "bag.csv").open()))
+    b = list(csv.DictReader((tmp_path / "folder.csv").open()))
+    assert len(a) == len(b) == len(frames)
+    for ra, rb in zip(a, b, strict=True):
+        assert float(ra["time"]) == pytest.approx(float(rb["time"]), abs=1e-9) and ra["fix"] == rb["fix"]
+        for k in ("x", "y", "z", "vx", "vy", "vz"):
+            assert float(ra[k]) == pytest.approx(float(rb[k]), abs=1e-9)
+
+
+def test_bad_recordings_are_one_clear_line(flight, tmp_path, capsys):
+    root, src, frames, imu = flight
+    bag = write_recording(root / "bad.bag", frames, imu, fmt="ros1", kind="mono8")
+    assert main(["detect", str(bag), "--topic", "/nope", "--quiet"]) == 2
+    assert "no topic '/nope'" in capsys.readouterr().err
+    assert main(["detect", str(bag), "--topic", "/imu", "--quiet"]) == 2
+    assert "holds sensor_msgs/msg/Imu" in capsys.readouterr().err
+    cut = tmp_path / "cut.bag"
+    cut.write_bytes(bag.read_bytes()[: bag.stat().st_size // 2])
+    code = main(["detect", str(cut), "--quiet"])
+    err = capsys.readouterr().err
+    assert code in (1, 2) and "Traceback" not in err and err.strip().splitlines()[-1].startswith("visloc detect")
+    with pytest.raises(SourceError, match="topic"):
+        open_source(src, topic="/camera/image")  # a topic for a folder
+
+
+def test_an_unknown_encoding_costs_its_frame_only(flight, tmp_path):
+    frames = flight[2]
+    store = get_typestore(Stores.ROS1_NOETIC)
+    path = tmp_path / "mixed.bag"
+    with Ros1Writer(path) as w:
+        cam = w.add_connection("/camera/image", "sensor_msgs/msg/Image", typestore=store)
+        for k, img in enumerate(frames[:3]):
+            msg = _image_msg(store, img, k / FPS, True, "mono8")
+            if k == 1:
+                msg = type(msg)(header=msg.header, height=msg.height, width=msg.width, encoding="yuv422",
+                                is_bigendian=0, step=msg.step, data=msg.data)
+            w.write(cam, T0 * 1_000_000_000 + round(k / FPS * 1e9), store.serialize_ros1(msg, "sensor_msgs/msg/Image"))
+    out = tmp_path / "d.jsonl"
+    assert main(["detect", str(path), "--dict", "DICT_4X4_100", "--out", str(out), "--quiet"]) == 1
+    lines = out.read_text().splitlines()
+    assert len(lines) == 3 and "yuv422" in lines[1] and '"markers"' in lines[0] and '"markers"' in lines[2]

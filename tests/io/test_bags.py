@@ -8,13 +8,18 @@ import cv2
 import numpy as np
 import pytest
 from rosbags.rosbag1 import Writer as Ros1Writer
-from rosbags.rosbag2 import StoragePlugin
-from rosbags.rosbag2 import Writer as Ros2Writer
 from rosbags.typesys import Stores, get_typestore
 
 from visloc.cli import main
 from visloc.io import open_source
-from visloc.io.bags import BagSource, read_bag_imu, recording_topics
+from visloc.io.bags import (
+    BagSource,
+    _header,
+    _image_message,
+    read_bag_imu,
+    recording_topics,
+    write_bag,
+)
 from visloc.io.sources import SourceError
 from visloc.markers import MarkerDetector
 
@@ -22,57 +27,10 @@ FPS = 10.0
 T0 = 1_700_000_000  # header stamps in epoch seconds, as a robot writes them
 
 
-def _stamp(store, t: float, ros1: bool, frame_id: str = "cam"):
-    ns = T0 * 1_000_000_000 + round(t * 1e9)  # integer ns: T0 + t in floats would lose 0.2 us
-    Time, Header = store.types["builtin_interfaces/msg/Time"], store.types["std_msgs/msg/Header"]
-    stamp = Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
-    return Header(seq=0, stamp=stamp, frame_id=frame_id) if ros1 else Header(stamp=stamp, frame_id=frame_id)
-
-
-def _image_msg(store, img: np.ndarray, t: float, ros1: bool, kind: str):
-    header = _stamp(store, t, ros1)
-    if kind == "png":
-        data = np.frombuffer(cv2.imencode(".png", img)[1].tobytes(), np.uint8)
-        return store.types["sensor_msgs/msg/CompressedImage"](header=header, format="png", data=data)
-    if kind == "rgb8":
-        img = cv2.cvtColor(img, cv2.COLOR_GRAY2RGB)
-    h, w = img.shape[:2]
-    step = w * (3 if kind == "rgb8" else 1)
-    return store.types["sensor_msgs/msg/Image"](header=header, height=h, width=w, encoding=kind, is_bigendian=0,
-                                                 step=step, data=img.reshape(-1))
-
-
-def _imu_msg(store, row: np.ndarray, ros1: bool):
-    Vec, Quat = store.types["geometry_msgs/msg/Vector3"], store.types["geometry_msgs/msg/Quaternion"]
-    return store.types["sensor_msgs/msg/Imu"](
-        header=_stamp(store, float(row[0]), ros1, "imu"), orientation=Quat(x=0.0, y=0.0, z=0.0, w=1.0),
-        orientation_covariance=np.zeros(9), angular_velocity=Vec(x=row[1], y=row[2], z=row[3]),
-        angular_velocity_covariance=np.zeros(9), linear_acceleration=Vec(x=row[4], y=row[5], z=row[6]),
-        linear_acceleration_covariance=np.zeros(9))
-
-
 def write_recording(path: Path, frames: list[np.ndarray], imu: np.ndarray, *, fmt: str, kind: str) -> Path:
     """A recording of ``frames`` (at FPS) on /camera/image and ``imu`` rows on /imu."""
-    ros1 = fmt == "ros1"
-    store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
-    img_type = "sensor_msgs/msg/CompressedImage" if kind == "png" else "sensor_msgs/msg/Image"
-    if ros1:
-        writer = Ros1Writer(path)
-    else:
-        plugin = StoragePlugin.MCAP if fmt == "mcap" else StoragePlugin.SQLITE3
-        writer = Ros2Writer(path, version=9, storage_plugin=plugin)
-    serialize = store.serialize_ros1 if ros1 else store.serialize_cdr
-    with writer as w:
-        cam = w.add_connection("/camera/image", img_type, typestore=store)
-        imu_conn = w.add_connection("/imu", "sensor_msgs/msg/Imu", typestore=store)
-        events = [(k / FPS, 0, k) for k in range(len(frames))] + [(float(r[0]), 1, i) for i, r in enumerate(imu)]
-        for t, what, i in sorted(events):
-            log = T0 * 1_000_000_000 + round((t + 0.003) * 1e9)  # logged 3 ms after the stamp
-            if what == 0:
-                w.write(cam, log, serialize(_image_msg(store, frames[i], t, ros1, kind), img_type))
-            else:
-                w.write(imu_conn, log, serialize(_imu_msg(store, imu[i], ros1), "sensor_msgs/msg/Imu"))
-    return path
+    return write_bag(path, frames, [k / FPS for k in range(len(frames))], imu=imu, fmt=fmt, encoding=kind,
+                     t0_ns=T0 * 1_000_000_000)
 
 
 @pytest.fixture(scope="module")
@@ -166,7 +124,7 @@ def test_an_unknown_encoding_costs_its_frame_only(flight, tmp_path):
     with Ros1Writer(path) as w:
         cam = w.add_connection("/camera/image", "sensor_msgs/msg/Image", typestore=store)
         for k, img in enumerate(frames[:3]):
-            msg = _image_msg(store, img, k / FPS, True, "mono8")
+            msg = _image_message(store, img, _header(store, T0 * 1_000_000_000 + k * 100_000_000, True, "c"), "mono8")
             if k == 1:
                 msg = type(msg)(header=msg.header, height=msg.height, width=msg.width, encoding="yuv422",
                                 is_bigendian=0, step=msg.step, data=msg.data)

@@ -15,6 +15,7 @@ Times
 
 from __future__ import annotations
 
+import functools
 import os
 from collections.abc import Iterator
 from pathlib import Path
@@ -28,7 +29,7 @@ from visloc.images import to_uint8
 from visloc.io.sources import FrameSource, SourceError
 from visloc.types import Frame
 
-__all__ = ["IMAGE_TYPES", "IMU_TYPE", "BagSource", "is_recording", "read_bag_imu", "recording_topics"]
+__all__ = ["IMAGE_TYPES", "IMU_TYPE", "BagSource", "is_recording", "read_bag_imu", "recording_topics", "write_bag"]
 
 #: Message types read as images.
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
@@ -48,7 +49,10 @@ def is_recording(path: str | os.PathLike[str]) -> bool:
     return p.is_dir() and (p / "metadata.yaml").is_file()
 
 
+@functools.cache
 def _rosbags():
+    """rosbags' reader class and the default type store (made once: building its ~150 message
+    classes costs about 0.1 s)."""
     try:
         from rosbags.highlevel import AnyReader
         from rosbags.typesys import Stores, get_typestore
@@ -249,3 +253,104 @@ def read_bag_imu(path: str | os.PathLike[str], *, topic: str | None = None,
         reader.close()
     out = np.array(rows, float).reshape(-1, 7)
     return out[np.argsort(out[:, 0], kind="stable")]
+
+
+def _header(store, ns: int, ros1: bool, frame_id: str):
+    Time, Header = store.types["builtin_interfaces/msg/Time"], store.types["std_msgs/msg/Header"]
+    stamp = Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+    return Header(seq=0, stamp=stamp, frame_id=frame_id) if ros1 else Header(stamp=stamp, frame_id=frame_id)
+
+
+def _image_message(store, img: NDArray[np.uint8], header, encoding: str):
+    if encoding in ("png", "jpeg"):
+        ok, buf = cv2.imencode(".png" if encoding == "png" else ".jpg", img)
+        if not ok:
+            raise ValueError(f"cannot encode a {img.shape} image as {encoding}")
+        return store.types["sensor_msgs/msg/CompressedImage"](header=header, format=encoding,
+                                                               data=np.frombuffer(buf.tobytes(), np.uint8))
+    if encoding == "rgb8":
+        img = cv2.cvtColor(img if img.ndim == 3 else cv2.cvtColor(img, cv2.COLOR_GRAY2BGR), cv2.COLOR_BGR2RGB)
+    elif encoding == "bgr8":
+        img = img if img.ndim == 3 else cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+    elif encoding == "mono8":
+        img = img if img.ndim == 2 else cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+    else:
+        raise ValueError(f"encoding must be mono8, bgr8, rgb8, png or jpeg, got {encoding!r}")
+    h, w = img.shape[:2]
+    return store.types["sensor_msgs/msg/Image"](header=header, height=h, width=w, encoding=encoding, is_bigendian=0,
+                                                 step=img.strides[0], data=np.ascontiguousarray(img).reshape(-1))
+
+
+def _imu_message(store, row: NDArray, header):
+    Vec, Quat = store.types["geometry_msgs/msg/Vector3"], store.types["geometry_msgs/msg/Quaternion"]
+    return store.types["sensor_msgs/msg/Imu"](
+        header=header, orientation=Quat(x=0.0, y=0.0, z=0.0, w=1.0), orientation_covariance=np.zeros(9),
+        angular_velocity=Vec(x=float(row[1]), y=float(row[2]), z=float(row[3])),
+        angular_velocity_covariance=np.zeros(9),
+        linear_acceleration=Vec(x=float(row[4]), y=float(row[5]), z=float(row[6])),
+        linear_acceleration_covariance=np.zeros(9))
+
+
+def write_bag(path: str | os.PathLike[str], frames: list[NDArray[np.uint8]], times: list[float], *,
+              imu: NDArray | None = None, fmt: str = "ros1", encoding: str = "mono8",
+              topic: str = "/camera/image", imu_topic: str = "/imu", t0_ns: int = 1_700_000_000 * 10**9,
+              log_delay: float = 0.003) -> Path:
+    """Write frames (and IMU samples) as a recording, with rosbags' writers.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A ``.bag`` file (``fmt="ros1"``) or a new ROS 2 bag folder (``"ros2"``: SQLite,
+        ``"mcap"``: MCAP storage).
+    frames : list of ndarray (H, W) or (H, W, 3) uint8
+        Grey or BGR images.
+    times : list of float
+        Each frame's time, s (its header stamp is ``t0_ns`` plus it).
+    imu : ndarray (M, 7), optional
+        ``t, gx, gy, gz, fx, fy, fz`` rows (as ``visloc render localize``'s ``imu.csv``).
+    fmt : str
+        ``"ros1"``, ``"ros2"`` or ``"mcap"``.
+    encoding : str
+        ``"mono8"``, ``"bgr8"``, ``"rgb8"`` (``sensor_msgs/Image``) or ``"png"``, ``"jpeg"``
+        (``sensor_msgs/CompressedImage``).
+    topic, imu_topic : str
+        The topics.
+    t0_ns : int
+        The stamp of time 0, ns since the epoch.
+    log_delay : float
+        Seconds between a message's stamp and its log time (a recorder's delay).
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
+    from rosbags.rosbag1 import Writer as Ros1Writer
+    from rosbags.rosbag2 import StoragePlugin
+    from rosbags.rosbag2 import Writer as Ros2Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    if fmt not in ("ros1", "ros2", "mcap"):
+        raise ValueError(f"fmt must be ros1, ros2 or mcap, got {fmt!r}")
+    if len(frames) != len(times):
+        raise ValueError(f"{len(frames)} frames but {len(times)} times")
+    ros1 = fmt == "ros1"
+    store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+    img_type = "sensor_msgs/msg/CompressedImage" if encoding in ("png", "jpeg") else "sensor_msgs/msg/Image"
+    serialize = store.serialize_ros1 if ros1 else store.serialize_cdr
+    plugin = StoragePlugin.MCAP if fmt == "mcap" else StoragePlugin.SQLITE3
+    writer = Ros1Writer(Path(path)) if ros1 else Ros2Writer(Path(path), version=9, storage_plugin=plugin)
+    rows = np.zeros((0, 7)) if imu is None else np.asarray(imu, float).reshape(-1, 7)
+    events = sorted([(float(t), 0, k) for k, t in enumerate(times)] + [(float(r[0]), 1, i) for i, r in enumerate(rows)])
+    with writer as w:
+        cam = w.add_connection(topic, img_type, typestore=store)
+        imu_conn = w.add_connection(imu_topic, IMU_TYPE, typestore=store) if len(rows) else None
+        for t, what, i in events:
+            ns = t0_ns + round(t * 1e9)  # integer ns: t0 + t in floats would lose 0.2 us
+            log = ns + round(log_delay * 1e9)
+            if what == 0:
+                msg = _image_message(store, frames[i], _header(store, ns, ros1, "camera"), encoding)
+                w.write(cam, log, serialize(msg, img_type))
+            else:
+                w.write(imu_conn, log, serialize(_imu_message(store, rows[i], _header(store, ns, ros1, "imu")), IMU_TYPE))
+    return Path(path)

@@ -226,6 +226,9 @@ def _add_flow(sub: argparse._SubParsersAction) -> None:
                     help="add the sub-pixel stage (direct alignment of the similarity): more accurate, slower")
     fl.add_argument("--out", metavar="FILE.csv", help="write one row per frame")
     fl.add_argument("--rerun", metavar="FILE.rrd", help="write a rerun recording")
+    fl.add_argument("--mavlink", nargs="?", const="udpout:127.0.0.1:14550", metavar="URL",
+                    help="send each pair's flow as OPTICAL_FLOW_RAD (camera axes) to a flight stack: a pymavlink "
+                         "connection string (default udpout:127.0.0.1:14550; needs visloc[mavlink])")
     fl.add_argument("--max-frames", type=_count, metavar="N", help="stop after N frames")
     fl.add_argument("--quiet", action="store_true", help="no progress bar or summary")
 

@@ -196,3 +196,26 @@ def test_detect_sends_the_pad_as_landing_target(tmp_path, capsys):
         assert msg.size_x == pytest.approx(2 * np.arctan(side / 2 / np.linalg.norm(t)), rel=1e-4)
     assert main([*base, "--mavlink"]) == 2  # which marker is the pad?
     assert "--target-id" in capsys.readouterr().err
+
+
+def test_flow_sends_each_pair_as_optical_flow_rad(tmp_path):
+    src = tmp_path / "ground"
+    assert main(["render", "flow", str(src), "--seconds", "0.3", "--fps", "30", "--seed", "3"]) == 0
+    port = _free_port()
+    rx = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", dialect="common")
+    out = tmp_path / "v.csv"
+    assert main(["flow", str(src), "--fps", "30", "--camera", str(src / "camera.yml"), "--height-csv",
+                 str(src / "heights.csv"), "--out", str(out), "--mavlink", f"udpout:127.0.0.1:{port}", "--quiet"]) == 0
+    flows = [m for m in _receive(rx) if m.get_type() == "OPTICAL_FLOW_RAD"]
+    rx.close()
+    rows = list(csv.DictReader(out.open()))[1:]  # the first frame has no pair
+    heights = {int(r["frame"]): float(r["height"]) for r in csv.DictReader((src / "heights.csv").open())}
+    assert len(flows) == len(rows) >= 8
+    for m, r in zip(flows, rows, strict=True):
+        dt, h = 1 / 30, heights[int(r["frame"])]
+        assert m.time_usec == round(float(r["time"]) * 1e6) and m.integration_time_us == round(dt * 1e6)
+        # moving along +x: positive flow about y; along +y: negative flow about x
+        assert m.integrated_y == pytest.approx(float(r["vx"]) * dt / h, rel=1e-5, abs=1e-9)
+        assert m.integrated_x == pytest.approx(-float(r["vy"]) * dt / h, rel=1e-5, abs=1e-9)
+        assert m.quality == round(255 * float(r["quality"])) and m.distance == pytest.approx(h, rel=1e-6)
+        assert math.isnan(m.integrated_xgyro)

@@ -96,6 +96,11 @@ def flow(args: argparse.Namespace) -> int:
         source = open_timed_source(stack, args)
         out = stack.enter_context(CsvWriter(args.out, FLOW_COLUMNS)) if args.out else None
         rec = stack.enter_context(RerunLogger(args.rerun)) if args.rerun else None
+        link = None
+        if getattr(args, "mavlink", None):
+            from visloc.io.mavlink import MavlinkSink
+
+            link = stack.enter_context(MavlinkSink(args.mavlink))
         ego: EgoMotion | None = None
         last_time = 0.0
         warned = [False]
@@ -144,6 +149,8 @@ def flow(args: argparse.Namespace) -> int:
                                  "quality": gv.quality, "reason": gv.reason, "x": x, "y": y, "yaw": ego.yaw})
             if rec:
                 rec.log_flow(frame.index, frame.time, frame.image, ego.last_field, gv, (x, y))
+            if link is not None:
+                link.send_optical_flow(frame.time, dt, gv.v, height, gv.quality)
     if not args.quiet:
         ms = f", median {1e3 * float(np.median(times)):.2f} ms per pair" if times else ""
         q = f", median quality {float(np.median(qualities)):.2f}" if qualities else ""

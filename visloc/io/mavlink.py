@@ -324,6 +324,45 @@ class MavlinkSink:
             _usec(time_s), int(target_num) % 256, m.MAV_FRAME_BODY_FRD, math.atan2(p[0], p[2]), math.atan2(p[1], p[2]),
             dist, size, size, *body, [1.0, 0.0, 0.0, 0.0], m.LANDING_TARGET_TYPE_VISION_FIDUCIAL, 1))
 
+    def send_optical_flow(self, time_s: float, interval_s: float, velocity_cam: ArrayLike, distance_m: float,
+                          quality: float) -> None:
+        """``OPTICAL_FLOW_RAD``: a downward camera's flow over one frame interval, as PX4's and
+        ArduPilot's flow drivers expect it from a flow sensor.
+
+        Parameters
+        ----------
+        time_s : float
+            The frame's time, s (the end of the interval).
+        interval_s : float
+            The interval, s (> 0).
+        velocity_cam : array_like (2,)
+            The camera's velocity over the ground in its own x (image right) and y (image
+            down) axes, m/s (``GroundVelocity.v``); non-finite: no flow (sent with quality 0).
+        distance_m : float
+            The height above the ground that scaled it, m.
+        quality : float
+            0-1 (``GroundVelocity.quality``), sent as 0-255.
+
+        Notes
+        -----
+        The sensor axes are the camera's. Moving along +x gives ``integrated_y = vx dt / h``
+        (positive), moving along +y gives ``integrated_x = -vy dt / h``: the angles the ground
+        turned through as seen by the camera, rotation included, as a flow sensor reports them
+        (the flight stack removes the rotation with its gyro: the gyro integrals are NaN).
+        """
+        dt = float(interval_s)
+        if not dt > 0 or not math.isfinite(dt):
+            raise ValueError(f"interval_s must be a positive number of seconds, got {interval_s!r}")
+        v = np.asarray(velocity_cam, float).reshape(2)
+        h = float(distance_m)
+        ok = bool(np.isfinite(v).all() and h > 0 and math.isfinite(h))
+        fx, fy = (-float(v[1]) * dt / h, float(v[0]) * dt / h) if ok else (0.0, 0.0)
+        q = round(255 * min(1.0, max(0.0, float(quality)))) if ok else 0
+        self.heartbeat(time_s)
+        self._send(self._mav.MAVLink_optical_flow_rad_message(
+            _usec(time_s), 0, round(dt * 1e6), fx, fy, math.nan, math.nan, math.nan, 0, q, 0,
+            h if h > 0 and math.isfinite(h) else -1.0))
+
     def close(self) -> None:
         """Send what is queued and close the link."""
         if self._thread is not None and self._queue is not None:

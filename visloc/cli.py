@@ -118,6 +118,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_sim(sub)
     _add_demo(sub)
     _add_info(sub)
+    _add_batch(sub)
     return parser
 
 
@@ -282,6 +283,23 @@ def _add_track(sub: argparse._SubParsersAction) -> None:
     _detection_tail(tk)
 
 
+def _add_batch(sub: argparse._SubParsersAction) -> None:
+    """The ``visloc batch`` sub-command's arguments."""
+    b = sub.add_parser("batch", help="one command over many recordings on Dask (local cores or a cluster)")
+    b.add_argument("batch_command", metavar="COMMAND", choices=("detect", "localize", "flow", "track"),
+                   help="detect, localize, flow or track")
+    b.add_argument("recordings", nargs="+", metavar="RECORDING",
+                   help="videos, image folders, bags (glob patterns are expanded)")
+    b.add_argument("--outdir", required=True, metavar="DIR",
+                   help="one output per recording (NAME.jsonl or NAME.csv) and summary.csv")
+    b.add_argument("--options", default="", metavar="'OPTIONS'",
+                   help="the command's options as one quoted string, e.g. '--dict DICT_4X4_100 --fps 30'")
+    b.add_argument("--workers", type=_count, metavar="N", help="local worker processes (default: one per core)")
+    b.add_argument("--scheduler", metavar="ADDRESS", help="a running Dask scheduler, e.g. tcp://10.0.0.5:8786")
+    b.add_argument("--force", action="store_true", help="run every recording, even those with an up-to-date output")
+    b.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+
+
 def _add_info(sub: argparse._SubParsersAction) -> None:
     """The ``visloc info`` sub-command's arguments."""
     inf = sub.add_parser("info", help="what a source holds: a recording's topics, a video's or folder's frames")
@@ -370,7 +388,8 @@ def _detector_arguments(p: argparse.ArgumentParser) -> None:
 _COMMANDS = {"detect": ("markers", "detect"), "render": ("markers", "render"), "demo": ("demo", "demo"),
              "flow": ("flow", "flow"), "track": ("localize", "track"), "localize": ("localize", "localize"),
              "model": ("model", "model"), "robust": ("robust", "robust"), "sim": ("sim", "sim"),
-             "calibrate": ("calibrate", "calibrate_camera"), "info": ("info", "info")}
+             "calibrate": ("calibrate", "calibrate_camera"), "info": ("info", "info"),
+             "batch": ("batch", "batch")}
 
 #: options naming files or folders a command reads, and those it writes
 _INPUTS = ("source", "camera", "map", "height_csv", "imu", "truth", "dict", "body", "reference", "board")

@@ -1,0 +1,108 @@
+"""``visloc batch`` on a real Dask engine: a LocalCluster of worker processes, and a scheduler
+with two workers started here on loopback, one of them killed mid-run."""
+
+import csv
+import os
+import shutil
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from visloc.batch import run_batch
+from visloc.cli import main
+
+
+@pytest.fixture(scope="module")
+def recordings(tmp_path_factory):
+    root = tmp_path_factory.mktemp("batch")
+    videos = []
+    for seed in (1, 2, 3):
+        assert main(["render", "markers", str(root / f"r{seed}"), "--video", "--n", "6", "--size", "320x240",
+                     "--seed", str(seed)]) == 0
+        videos.append(shutil.move(root / f"r{seed}" / "markers.mp4", root / f"v{seed}.mp4"))
+    (root / "broken.mp4").write_text("not a video\n")
+    serial = {}
+    for v in videos:  # what plain `visloc detect` writes, one recording at a time
+        out = root / f"serial_{Path(v).stem}.jsonl"
+        assert main(["detect", str(v), "--dict", "DICT_4X4_50", "--out", str(out), "--quiet"]) == 0
+        serial[Path(v).stem] = out.read_bytes()
+    return root, [str(v) for v in videos], serial
+
+
+def _summary(outdir: Path) -> dict[str, dict]:
+    return {Path(r["recording"]).stem: r for r in csv.DictReader((outdir / "summary.csv").open())}
+
+
+def test_local_cluster_writes_what_serial_runs_write_and_reruns_only_what_is_missing(recordings, tmp_path, capsys):
+    root, videos, serial = recordings
+    out = tmp_path / "out"
+    argv = ["batch", "detect", *videos, str(root / "broken.mp4"), "--outdir", str(out), "--workers", "2",
+            "--options", "--dict DICT_4X4_50", "--quiet"]
+    assert main(argv) == 1  # the broken recording failed; the batch went on
+    for stem, data in serial.items():
+        assert (out / f"{stem}.jsonl").read_bytes() == data  # byte for byte the serial run's output
+    s = _summary(out)
+    assert {k: s[k]["status"] for k in s} == {"v1": "done", "v2": "done", "v3": "done", "broken": "failed"}
+    assert "cannot open video" in s["broken"]["message"] and not (out / "broken.jsonl").exists()
+    assert not list(out.glob("*.part"))  # no partial file left behind
+    assert all(s[k]["rows"] == "6" for k in ("v1", "v2", "v3"))
+    (out / "v2.jsonl").unlink()
+    assert main(argv) == 1
+    s = _summary(out)
+    assert [s[k]["status"] for k in ("v1", "v2", "v3")] == ["skipped", "done", "skipped"]
+    assert (out / "v2.jsonl").read_bytes() == serial["v2"]
+    assert main([*argv[:-3], "--options", "--dict DICT_4X4_50 --fast", "--quiet"]) == 1  # other options: all again
+    assert [_summary(out)[k]["status"] for k in ("v1", "v2", "v3")] == ["done"] * 3
+    capsys.readouterr()
+    assert main(["batch", "detect", videos[0], "--outdir", str(tmp_path / "o2"), "--options", "--out x.jsonl"]) == 2
+    assert "leave --out" in capsys.readouterr().err
+
+
+def _start(args: list[str], log: Path) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", *args], stdout=log.open("w"), stderr=subprocess.STDOUT,
+                            start_new_session=True)
+
+
+def test_a_worker_killed_mid_run_loses_no_recording(recordings, tmp_path):
+    _, videos, serial = recordings
+    port = 20000 + os.getpid() % 20000
+    address = f"tcp://127.0.0.1:{port}"
+    procs = [_start(["distributed.cli.dask_scheduler", "--host", "127.0.0.1", "--port", str(port),
+                     "--dashboard-address", ":0", "--no-show"], tmp_path / "scheduler.log")]
+    try:
+        for k in range(2):
+            procs.append(_start(["distributed.cli.dask_worker", address, "--nworkers", "1", "--nthreads", "1",
+                                 "--no-dashboard", "--name", f"w{k}"], tmp_path / f"worker{k}.log"))
+        from dask.distributed import Client
+
+        with Client(address, timeout=30) as client:  # retries until the scheduler is up
+            client.wait_for_workers(2, timeout=30)
+        many = videos * 4  # twelve tasks; outputs need distinct names: copies of the videos
+        copies = []
+        for i, v in enumerate(many):
+            c = tmp_path / f"rec{i:02d}.mp4"
+            shutil.copy(v, c)
+            copies.append(str(c))
+
+        def kill_one_worker(res):
+            if len(done) == 2:
+                os.killpg(procs[1].pid, signal.SIGKILL)
+            done.append(res)
+
+        done = []
+        results = run_batch("detect", copies, "--dict DICT_4X4_50", tmp_path / "out", scheduler=address,
+                            progress=kill_one_worker)
+        assert procs[1].poll() is not None  # it was killed while tasks remained
+        assert sorted(r.recording for r in results) == sorted(copies) and {r.status for r in results} == {"done"}
+        for i, v in enumerate(many):
+            assert (tmp_path / "out" / f"rec{i:02d}.jsonl").read_bytes() == serial[Path(v).stem].replace(
+                str(v).encode(), copies[i].encode())
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                os.killpg(p.pid, signal.SIGTERM)
+        for p in procs:
+            p.wait(timeout=10)

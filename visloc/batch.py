@@ -1,0 +1,266 @@
+"""Many recordings through one command on Dask (``dask.distributed``, the optional extra
+``visloc[batch]``): one task per recording, on a local cluster (one worker process per core,
+no setup) or on a running scheduler.
+
+Each task runs the command as ``visloc COMMAND RECORDING OPTIONS --out TMP --quiet`` would, in
+the worker's own process, and renames ``TMP`` to its final name only when the command finished
+(exit status 0, or 1: some frames unreadable, each recorded in the output): an interrupted or
+failed task leaves no partial file, and a task re-run after a worker died simply writes again.
+A manifest (``batch.json``) records the command and its options; a later batch with the same
+ones skips each recording whose output exists and is newer than the recording.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import os
+import shlex
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from visloc.errors import UsageError
+
+__all__ = ["BATCH_COMMANDS", "RecordingResult", "output_name", "plan", "run_batch", "run_one"]
+
+#: The commands a batch runs, and the extension of their ``--out`` file.
+BATCH_COMMANDS = {"detect": ".jsonl", "localize": ".csv", "flow": ".csv", "track": ".jsonl"}
+
+MANIFEST = "batch.json"
+SUMMARY = "summary.csv"
+SUMMARY_COLUMNS = ("recording", "output", "status", "exit", "rows", "seconds", "message")
+
+
+@dataclass(frozen=True)
+class RecordingResult:
+    """What one recording's task did.
+
+    Attributes
+    ----------
+    recording : str
+        The input path.
+    output : str
+        Its output file.
+    status : str
+        ``"done"`` (exit 0), ``"partial"`` (exit 1: some frames unreadable, each recorded),
+        ``"failed"`` (no output) or ``"skipped"`` (an up-to-date output was there).
+    exit : int
+        The command's exit status (0 for skipped).
+    rows : int
+        Lines of the output (frames and error lines), 0 when failed.
+    seconds : float
+        Wall time of the task.
+    message : str
+        The command's last stderr line when it did not exit 0, else empty.
+    """
+
+    recording: str
+    output: str
+    status: str
+    exit: int
+    rows: int
+    seconds: float
+    message: str
+
+
+def output_name(recording: str | os.PathLike[str], command: str) -> str:
+    """The output file's name for a recording: its file or folder name with the command's
+    extension (``flight.mp4`` -> ``flight.jsonl`` for ``detect``)."""
+    p = Path(recording)
+    stem = p.stem if p.is_file() else p.name
+    return f"{stem}{BATCH_COMMANDS[command]}"
+
+
+def _count_rows(path: Path, command: str) -> int:
+    with path.open() as fh:
+        n = sum(1 for _ in fh)
+    return n - 1 if BATCH_COMMANDS[command] == ".csv" else n
+
+
+def run_one(command: str, recording: str, options: Sequence[str], output: str) -> RecordingResult:
+    """Run ``visloc COMMAND RECORDING OPTIONS`` into ``output`` (a task; also usable alone).
+
+    Parameters
+    ----------
+    command : str
+        A key of :data:`BATCH_COMMANDS`.
+    recording : str
+        The input (video, folder, bag, ...).
+    options : sequence of str
+        The command's options (not ``--out``, ``--quiet``).
+    output : str
+        The final output path; the command writes ``output + ".part"``, renamed at the end.
+
+    Returns
+    -------
+    RecordingResult
+    """
+    from visloc.cli import main
+
+    part = f"{output}.part"
+    err = io.StringIO()
+    t0 = time.perf_counter()
+    with contextlib.redirect_stderr(err):
+        try:
+            code = main([command, recording, *options, "--out", part, "--quiet"])
+        except SystemExit as exc:  # argparse's usage errors
+            code = int(exc.code or 0)
+    seconds = time.perf_counter() - t0
+    lines = [x for x in err.getvalue().splitlines() if x.strip()]
+    message = lines[-1] if code and lines else ""
+    if code in (0, 1) and os.path.exists(part):
+        os.replace(part, output)
+        rows = _count_rows(Path(output), command)
+        return RecordingResult(recording, output, "done" if code == 0 else "partial", code, rows, seconds, message)
+    with contextlib.suppress(FileNotFoundError):
+        os.remove(part)
+    return RecordingResult(recording, output, "failed", code, 0, seconds, message or f"exit status {code}")
+
+
+def plan(command: str, recordings: Sequence[str], options: Sequence[str], outdir: str | os.PathLike[str], *,
+         force: bool = False) -> tuple[list[tuple[str, str]], list[RecordingResult]]:
+    """Which recordings need a task: ``(to run [(recording, output)], skipped results)``.
+
+    A recording is skipped when the manifest in ``outdir`` holds the same command and options
+    and its output exists and is newer than the recording (``force``: never).
+
+    Raises
+    ------
+    visloc.errors.UsageError
+        An unknown command, no recordings, two recordings with the same output name, or an
+        output folder that is one of the recordings.
+    """
+    if command not in BATCH_COMMANDS:
+        raise UsageError(f"batch runs {', '.join(BATCH_COMMANDS)}, not {command!r}")
+    if not recordings:
+        raise UsageError("batch: no recordings given")
+    out = Path(outdir)
+    names: dict[str, str] = {}
+    for r in recordings:
+        name = output_name(r, command)
+        if name in names:
+            raise UsageError(f"batch: {r} and {names[name]} would both write {name}: rename one")
+        names[name] = r
+        if Path(r).resolve() == out.resolve():
+            raise UsageError(f"batch: the output folder {outdir} is a recording")
+    manifest = out / MANIFEST
+    same = False
+    if manifest.is_file() and not force:
+        with contextlib.suppress(ValueError, OSError):
+            old = json.loads(manifest.read_text())
+            same = old.get("command") == command and old.get("options") == list(options)
+    todo, skipped = [], []
+    for name, r in names.items():
+        target = out / name
+        if same and target.is_file() and target.stat().st_mtime >= _mtime(r):
+            skipped.append(RecordingResult(r, str(target), "skipped", 0, _count_rows(target, command), 0.0, ""))
+        else:
+            todo.append((r, str(target)))
+    return todo, skipped
+
+
+def _mtime(path: str) -> float:
+    """The newest modification time of a file, or of a folder and the files in it."""
+    p = Path(path)
+    if not p.exists():
+        return float("inf")  # a missing recording is never up to date (its task reports it)
+    if p.is_dir():
+        return max([p.stat().st_mtime] + [c.stat().st_mtime for c in p.iterdir() if c.is_file()])
+    return p.stat().st_mtime
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    part = path.with_name(path.name + ".part")
+    part.write_text(text)
+    os.replace(part, path)
+
+
+def write_summary(outdir: str | os.PathLike[str], results: Sequence[RecordingResult]) -> Path:
+    """``summary.csv`` in ``outdir``: one row per recording (written atomically)."""
+    import csv
+
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, SUMMARY_COLUMNS, lineterminator="\n")
+    w.writeheader()
+    for r in sorted(results, key=lambda r: r.recording):
+        w.writerow({k: (f"{v:.3f}" if isinstance(v, float) else v) for k, v in asdict(r).items()})
+    path = Path(outdir) / SUMMARY
+    _write_atomic(path, buf.getvalue())
+    return path
+
+
+def load_dask():
+    """``dask.distributed`` or a :class:`visloc.errors.UsageError` naming the extra."""
+    try:
+        import dask.distributed as dd
+    except ImportError:
+        raise UsageError("visloc batch needs Dask: pip install 'visloc[batch]'") from None
+    return dd
+
+
+def run_batch(command: str, recordings: Sequence[str], options: str | Sequence[str], outdir: str | os.PathLike[str],
+              *, workers: int | None = None, scheduler: str | None = None, force: bool = False,
+              progress: Callable[[RecordingResult], None] | None = None) -> list[RecordingResult]:
+    """Run ``command`` over ``recordings`` on Dask; outputs and ``summary.csv`` in ``outdir``.
+
+    Parameters
+    ----------
+    command : str
+        ``"detect"``, ``"localize"``, ``"flow"`` or ``"track"``.
+    recordings : sequence of str
+        Videos, image folders, bags...
+    options : str or sequence of str
+        The command's options (a string is split as a shell would).
+    outdir : str or os.PathLike
+        Output folder (made if missing).
+    workers : int, optional
+        Local worker processes (default: one per core). Ignored with ``scheduler``.
+    scheduler : str, optional
+        A running Dask scheduler's address (``tcp://host:8786``).
+    force : bool
+        Run every recording, even those with an up-to-date output.
+    progress : callable, optional
+        Called with each :class:`RecordingResult` as it arrives.
+
+    Returns
+    -------
+    list of RecordingResult
+        Skipped ones first, then in the order they finished.
+    """
+    opts = shlex.split(options) if isinstance(options, str) else list(options)
+    if any(o in ("--out", "--quiet") for o in opts):
+        raise UsageError("batch writes each recording's --out itself: leave --out and --quiet out of --options")
+    out = Path(outdir)
+    out.mkdir(parents=True, exist_ok=True)
+    todo, results = plan(command, recordings, opts, out, force=force)
+    for r in results:
+        if progress is not None:
+            progress(r)
+    _write_atomic(out / MANIFEST, json.dumps({"command": command, "options": opts}, indent=1) + "\n")
+    if todo:
+        dd = load_dask()
+        with contextlib.ExitStack() as stack:
+            if scheduler:
+                client = stack.enter_context(dd.Client(scheduler))
+            else:
+                n = workers or os.cpu_count() or 1
+                cluster = stack.enter_context(dd.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                                              dashboard_address=None))
+                client = stack.enter_context(dd.Client(cluster))
+            futures = [client.submit(run_one, command, rec, opts, target, pure=False, key=f"visloc-{i}-{Path(rec).name}")
+                       for i, (rec, target) in enumerate(todo)]
+            try:
+                for fut in dd.as_completed(futures):
+                    res = fut.result()
+                    results.append(res)
+                    if progress is not None:
+                        progress(res)
+            except BaseException:
+                client.cancel(futures)
+                write_summary(out, results)
+                raise
+    write_summary(out, results)
+    return results

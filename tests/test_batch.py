@@ -32,14 +32,24 @@ def recordings(tmp_path_factory):
     return root, [str(v) for v in videos], serial
 
 
+@pytest.fixture(scope="module")
+def cluster():
+    """Two worker processes for the module's batches (each imports visloc once)."""
+    from dask.distributed import LocalCluster
+
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as c:
+        yield c.scheduler_address
+
+
 def _summary(outdir: Path) -> dict[str, dict]:
     return {Path(r["recording"]).stem: r for r in csv.DictReader((outdir / "summary.csv").open())}
 
 
-def test_local_cluster_writes_what_serial_runs_write_and_reruns_only_what_is_missing(recordings, tmp_path, capsys):
+def test_local_cluster_writes_what_serial_runs_write_and_reruns_only_what_is_missing(recordings, cluster, tmp_path,
+                                                                                     capsys):
     root, videos, serial = recordings
     out = tmp_path / "out"
-    argv = ["batch", "detect", *videos, str(root / "broken.mp4"), "--outdir", str(out), "--workers", "2",
+    argv = ["batch", "detect", *videos, str(root / "broken.mp4"), "--outdir", str(out), "--scheduler", cluster,
             "--options", "--dict DICT_4X4_50", "--quiet"]
     assert main(argv) == 1  # the broken recording failed; the batch went on
     for stem, data in serial.items():
@@ -59,6 +69,12 @@ def test_local_cluster_writes_what_serial_runs_write_and_reruns_only_what_is_mis
     capsys.readouterr()
     assert main(["batch", "detect", videos[0], "--outdir", str(tmp_path / "o2"), "--options", "--out x.jsonl"]) == 2
     assert "leave --out" in capsys.readouterr().err
+
+
+def test_workers_start_a_local_cluster_of_their_own(recordings, tmp_path):
+    _, videos, serial = recordings
+    assert main(["batch", "detect", videos[0], "--outdir", str(tmp_path), "--workers", "1", "--quiet"]) == 0
+    assert (tmp_path / "v1.jsonl").read_bytes() == serial["v1"]
 
 
 def _start(args: list[str], log: Path) -> subprocess.Popen:

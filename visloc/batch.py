@@ -172,6 +172,14 @@ def _mtime(path: str) -> float:
     return p.stat().st_mtime
 
 
+def _has_dashboard(client) -> bool:
+    """Whether the scheduler serves Dask's dashboard (it needs bokeh)."""
+    try:
+        return bool(client.scheduler_info().get("services", {}).get("dashboard"))
+    except Exception:  # noqa: BLE001 - an older scheduler: no dashboard said
+        return False
+
+
 def _write_atomic(path: Path, text: str) -> None:
     part = path.with_name(path.name + ".part")
     part.write_text(text)
@@ -203,7 +211,8 @@ def load_dask():
 
 def run_batch(command: str, recordings: Sequence[str], options: str | Sequence[str], outdir: str | os.PathLike[str],
               *, workers: int | None = None, scheduler: str | None = None, force: bool = False,
-              progress: Callable[[RecordingResult], None] | None = None) -> list[RecordingResult]:
+              progress: Callable[[RecordingResult], None] | None = None,
+              dashboard: Callable[[str], None] | None = None) -> list[RecordingResult]:
     """Run ``command`` over ``recordings`` on Dask; outputs and ``summary.csv`` in ``outdir``.
 
     Parameters
@@ -224,6 +233,8 @@ def run_batch(command: str, recordings: Sequence[str], options: str | Sequence[s
         Run every recording, even those with an up-to-date output.
     progress : callable, optional
         Called with each :class:`RecordingResult` as it arrives.
+    dashboard : callable, optional
+        Called with the Dask dashboard's address when the cluster serves one (bokeh installed).
 
     Returns
     -------
@@ -248,8 +259,10 @@ def run_batch(command: str, recordings: Sequence[str], options: str | Sequence[s
             else:
                 n = workers or os.cpu_count() or 1
                 cluster = stack.enter_context(dd.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                                              dashboard_address=None))
+                                                              dashboard_address=":0"))  # any free port
                 client = stack.enter_context(dd.Client(cluster))
+            if dashboard is not None and _has_dashboard(client):
+                dashboard(client.dashboard_link)
             futures = [client.submit(run_one, command, rec, opts, target, pure=False, key=f"visloc-{i}-{Path(rec).name}")
                        for i, (rec, target) in enumerate(todo)]
             try:

@@ -12,7 +12,6 @@ from visloc.control import (
     design_gains,
     largest_sigma,
     max_sigma,
-    robust_summary,
     vertex_check,
     vertex_stability,
 )
@@ -105,23 +104,6 @@ def test_vertex_check_fails_far_out_and_largest_sigma(gains):
     assert vertex_check(n, gains=gains).vertex_stable
     assert not vertex_check(n + 0.02, gains=gains).vertex_stable
     assert max_sigma(P) == pytest.approx(P.d_mean / P.d_std)
-
-
-def test_robust_summary_keys():
-    s = robust_summary(1.0)
-    assert {"vertices", "vertex_stable", "max_real_eig", "lyapunov"} <= set(s)
-    assert s["vertices"] == 256 and s["vertex_stable"] is True
-    assert isinstance(s["max_real_eig"], float)
-    assert s["lyapunov"] in ("feasible", "infeasible", "unavailable")
-    assert s["lyapunov"] == ("feasible" if _cvxpy_importable() else "unavailable")
-
-
-def _cvxpy_importable():
-    try:
-        import cvxpy  # noqa: F401
-    except ImportError:
-        return False
-    return True
 
 
 def test_bad_arguments():

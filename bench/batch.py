@@ -1,0 +1,111 @@
+"""``visloc batch`` on Dask against plain ``visloc`` processes on the same recordings, in one run
+(issue 19): the speed-up two local workers reach against the one two plain ``visloc detect``
+processes side by side reach, and the engine's overhead with one worker against a plain serial
+loop (Dask's start-up included).
+
+    python bench/batch.py              # writes bench/results/batch.{json,md}
+
+The recordings: one rendered 640x480 marker video (``visloc render markers --video``) copied
+``--recordings`` times. Every configuration runs ``visloc detect REC --out ... --quiet`` per
+recording: a serial loop of processes (a shell loop), two processes side by side (half the
+recordings each), ``visloc batch`` with 1 and with 2 local workers. Configurations alternate
+over rounds; the median wall time of each is kept.
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from _results import fmt, write_results
+
+ROOT = Path(__file__).resolve().parents[1]
+VISLOC = [sys.executable, "-m", "visloc"]
+
+
+def _serial(recs: list[Path], out: Path) -> None:
+    for r in recs:
+        subprocess.run([*VISLOC, "detect", str(r), "--out", str(out / f"{r.stem}.jsonl"), "--quiet"], check=True)
+
+
+def _two_processes(recs: list[Path], out: Path) -> None:
+    halves = [recs[0::2], recs[1::2]]
+    script = "; ".join(f"{' '.join(VISLOC)} detect {r} --out {out / (r.stem + '.jsonl')} --quiet" for r in halves[0])
+    other = "; ".join(f"{' '.join(VISLOC)} detect {r} --out {out / (r.stem + '.jsonl')} --quiet" for r in halves[1])
+    procs = [subprocess.Popen(["bash", "-c", s]) for s in (script, other)]
+    for p in procs:
+        if p.wait() != 0:
+            raise RuntimeError("a plain visloc detect failed")
+
+
+def _batch(recs: list[Path], out: Path, workers: int) -> None:
+    subprocess.run([*VISLOC, "batch", "detect", *map(str, recs), "--outdir", str(out), "--workers", str(workers),
+                    "--force", "--quiet"], check=True)
+
+
+def run(frames: int, recordings: int, rounds: int, work: Path) -> dict:
+    subprocess.run([*VISLOC, "render", "markers", str(work / "render"), "--video", "--n", str(frames), "--size",
+                    "640x480", "--seed", "7"], check=True, capture_output=True)
+    recs = []
+    for k in range(recordings):
+        recs.append(Path(shutil.copy(work / "render" / "markers.mp4", work / f"rec{k}.mp4")))
+    configs = {"serial loop of visloc detect": lambda o: _serial(recs, o),
+               "two visloc detect side by side": lambda o: _two_processes(recs, o),
+               "visloc batch, 1 worker": lambda o: _batch(recs, o, 1),
+               "visloc batch, 2 workers": lambda o: _batch(recs, o, 2)}
+    spent: dict[str, list[float]] = {k: [] for k in configs}
+    for r in range(rounds):
+        for name in (list(configs) if r % 2 == 0 else list(configs)[::-1]):
+            out = work / f"out_{r}_{abs(hash(name))}"
+            out.mkdir()
+            t0 = time.perf_counter()
+            configs[name](out)
+            spent[name].append(time.perf_counter() - t0)
+            assert len(list(out.glob("rec*.jsonl"))) == recordings
+            shutil.rmtree(out)
+    med = {k: float(np.median(v)) for k, v in spent.items()}
+    serial = med["serial loop of visloc detect"]
+    two = serial / med["two visloc detect side by side"]
+    b2 = serial / med["visloc batch, 2 workers"]
+    return {"frames_per_recording": frames, "recordings": recordings, "rounds": rounds,
+            "seconds": med, "speedup_two_processes": two, "speedup_batch_2_workers": b2,
+            "batch_vs_processes": b2 / two, "overhead_1_worker": med["visloc batch, 1 worker"] / serial - 1.0,
+            "ms_per_frame_serial": 1e3 * serial / (frames * recordings)}
+
+
+def markdown(r: dict) -> str:
+    lines = [(f"**visloc batch** ({r['recordings']} recordings of {r['frames_per_recording']} rendered 640x480 frames, "
+             f"`detect`; median of {r['rounds']} alternating rounds, wall time)"), "",
+             "| configuration | s | speed-up vs the serial loop |", "|---|---|---|"]
+    serial = r["seconds"]["serial loop of visloc detect"]
+    for k, v in r["seconds"].items():
+        lines.append(f"| {k} | {fmt(v, 2)} | {fmt(serial / v, 2)} |")
+    lines += ["", (f"Two workers reach {fmt(r['batch_vs_processes'], 2)} of the two plain processes' speed-up; "
+                  f"one worker costs {fmt(100 * r['overhead_1_worker'], 1)} % over the serial loop (Dask's start-up "
+                  f"included); detection {fmt(r['ms_per_frame_serial'], 2)} ms per frame in the serial loop.")]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--frames", type=int, default=1200)
+    ap.add_argument("--recordings", type=int, default=4)
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--out", default=str(ROOT / "bench/results"))
+    args = ap.parse_args(argv)
+    with tempfile.TemporaryDirectory() as work:
+        result = run(args.frames, args.recordings, args.rounds, Path(work))
+    result["machine"] = {"python": sys.version.split()[0], "platform": platform.platform()}
+    write_results(args.out, "batch", result, markdown(result))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -210,7 +210,8 @@ def _write_atomic(path: Path, text: str) -> None:
 
 
 def write_summary(outdir: str | os.PathLike[str], results: Sequence[RecordingResult]) -> Path:
-    """``summary.csv`` in ``outdir``: one row per recording (written atomically)."""
+    """``summary.csv`` in ``outdir``: one row per recording (written atomically), and the same
+    table as ``summary.parquet`` where pyarrow is installed."""
     import csv
 
     buf = io.StringIO()
@@ -220,6 +221,16 @@ def write_summary(outdir: str | os.PathLike[str], results: Sequence[RecordingRes
         w.writerow({k: (f"{v:.3f}" if isinstance(v, float) else v) for k, v in asdict(r).items()})
     path = Path(outdir) / SUMMARY
     _write_atomic(path, buf.getvalue())
+    try:  # and as Parquet where pyarrow is installed (the same rows and columns)
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+    except ImportError:
+        return path
+    rows = [asdict(r) for r in sorted(results, key=lambda r: r.recording)]
+    table = pa.table({k: [row[k] for row in rows] for k in SUMMARY_COLUMNS})
+    part = path.with_suffix(".parquet.part")
+    pq.write_table(table, part)
+    os.replace(part, path.with_suffix(".parquet"))
     return path
 
 

@@ -114,15 +114,7 @@ def localize(args: argparse.Namespace) -> int:
     if args.truth:
         truth = dict(zip(("t", "x", "y", "z"), _finite_rows(args.truth, "--truth", ("t", "x", "y", "z")).T,
                          strict=True))
-    imu = _read_imu(args.imu) if args.imu else None
-    if getattr(args, "imu_topic", None):
-        from visloc.io.bags import is_recording, read_bag_imu
-
-        if not is_recording(args.source):
-            raise UsageError(f"--imu-topic reads a ROS bag or MCAP source; {args.source} is not one")
-        imu = read_bag_imu(args.source, topic=args.imu_topic, image_topic=args.topic)[:, [0, 4, 5, 6]]
-        if len(imu) == 0:
-            raise UsageError(f"--imu-topic {args.imu_topic}: no IMU messages")
+    imu = _imu_input(args)
     fusion = MapFixFusion(accel_noise=args.accel_noise)  # the map's z axis points up: gravity (0, 0, -9.81)
     R_map_cam = None
     last_t = None
@@ -187,6 +179,23 @@ def localize(args: argparse.Namespace) -> int:
         print(f"visloc localize: {n_frames} frames, {fixes} position fixes, {failed} unreadable{used}{err}",
               file=sys.stderr)
     return 1 if failed else 0
+
+def _imu_input(args: argparse.Namespace) -> np.ndarray | None:
+    """(M, 4) ``t, fx, fy, fz`` from ``--imu`` (a CSV) or ``--imu-topic`` (the source recording's
+    ``sensor_msgs/Imu``), or None."""
+    if args.imu:
+        return _read_imu(args.imu)
+    if not getattr(args, "imu_topic", None):
+        return None
+    from visloc.io.bags import is_recording, read_bag_imu
+
+    if not is_recording(args.source):
+        raise UsageError(f"--imu-topic reads a ROS bag or MCAP source; {args.source} is not one")
+    imu = read_bag_imu(args.source, topic=args.imu_topic, image_topic=args.topic)[:, [0, 4, 5, 6]]
+    if len(imu) == 0:
+        raise UsageError(f"--imu-topic {args.imu_topic}: no IMU messages")
+    return imu
+
 
 def _send_fix(link, args: argparse.Namespace, fusion, R_map_cam: np.ndarray, t: float) -> None:
     """The filter's estimate after a fix, to the flight stack (``--mavlink``): position (and

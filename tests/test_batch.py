@@ -126,3 +126,30 @@ def test_a_worker_killed_mid_run_loses_no_recording(recordings, tmp_path):
                 os.killpg(p.pid, signal.SIGTERM)
         for p in procs:
             p.wait(timeout=10)
+
+
+def test_chunked_videos_join_into_the_unchunked_output(recordings, cluster, tmp_path, capsys):
+    _, videos, serial = recordings
+    out = tmp_path / "chunked"
+    # six frames a video in chunks of 2: three tasks each, joined in frame order
+    assert main(["batch", "detect", *videos, "--outdir", str(out), "--scheduler", cluster, "--chunk", "2",
+                 "--options", "--dict DICT_4X4_50", "--quiet"]) == 0
+    for stem, data in serial.items():
+        assert (out / f"{stem}.jsonl").read_bytes() == data
+    assert sorted(p.name for p in out.glob("*.jsonl")) == ["v1.jsonl", "v2.jsonl", "v3.jsonl"]
+    assert not list(out.glob("*.chunk*")) and not list(out.glob("*.part"))  # the chunks' files are gone
+    assert main(["batch", "flow", *videos, "--outdir", str(out / "f"), "--chunk", "2"]) == 2
+    assert "--chunk needs detect" in capsys.readouterr().err
+
+
+def test_frame_range_keeps_the_sources_indices_and_times(recordings, tmp_path):
+    _, videos, serial = recordings
+    parts = []
+    for k, rng in enumerate(["0:2", "2:5", "5:"]):
+        out = tmp_path / f"p{k}.jsonl"
+        assert main(["detect", videos[1], "--dict", "DICT_4X4_50", "--frame-range", rng, "--out", str(out),
+                     "--quiet"]) == 0
+        parts.append(out.read_bytes())
+    assert b"".join(parts) == serial["v2"] and parts[1].count(b"\n") == 3
+    with pytest.raises(SystemExit):
+        main(["detect", videos[1], "--frame-range", "4:2"])

@@ -195,6 +195,53 @@ def _mtime(path: str) -> float:
     return p.stat().st_mtime
 
 
+def _chunks(recording: str, chunk: int | None) -> list[tuple[int, int | None]]:
+    """Frame ranges ``[start, stop)`` splitting a recording into tasks of ``chunk`` frames (the
+    last one open-ended, so frames beyond a wrong declared count still go to it); one range
+    when ``chunk`` is None, the length is unknown or it fits in one chunk."""
+    if not chunk:
+        return [(0, None)]
+    from visloc.io import open_source
+
+    try:
+        with open_source(recording) as src:
+            n = len(src)
+    except Exception:  # noqa: BLE001 - unknown length or unreadable: one task (which reports it)
+        return [(0, None)]
+    starts = list(range(0, n, chunk))
+    if len(starts) < 2:
+        return [(0, None)]
+    return [(a, a + chunk) for a in starts[:-1]] + [(starts[-1], None)]
+
+
+def _merge(recording: str, output: str, parts: list[RecordingResult], command: str) -> RecordingResult:
+    """One recording's result from its chunks' (in frame order): their outputs concatenated
+    into ``output`` when every chunk finished, else a failure naming the first that did not."""
+    files = [p.output for p in parts]
+    seconds = sum(p.seconds for p in parts)
+    failed = [p for p in parts if p.status == "failed"]
+    if failed:
+        for f in files:
+            with contextlib.suppress(FileNotFoundError):
+                os.remove(f)
+        return RecordingResult(recording, output, "failed", failed[0].exit, 0, seconds, failed[0].message)
+    part = f"{output}.part"
+    with open(part, "wb") as out:
+        for k, f in enumerate(files):
+            with open(f, "rb") as fh:
+                data = fh.read()
+            if k and BATCH_COMMANDS[command] == ".csv":  # a chunk's header line again
+                data = data.split(b"\n", 1)[1] if b"\n" in data else b""
+            out.write(data)
+    os.replace(part, output)
+    for f in files:
+        os.remove(f)
+    code = max(p.exit for p in parts)
+    message = next((p.message for p in parts if p.message), "")
+    return RecordingResult(recording, output, "done" if code == 0 else "partial", code,
+                           _count_rows(Path(output), command), seconds, message)
+
+
 def _has_dashboard(client) -> bool:
     """Whether the scheduler serves Dask's dashboard (it needs bokeh)."""
     try:
@@ -245,6 +292,7 @@ def load_dask():
 
 def run_batch(command: str, recordings: Sequence[str], options: str | Sequence[str], outdir: str | os.PathLike[str],
               *, workers: int | None = None, scheduler: str | None = None, force: bool = False,
+              chunk: int | None = None,
               progress: Callable[[RecordingResult], None] | None = None,
               dashboard: Callable[[str], None] | None = None) -> list[RecordingResult]:
     """Run ``command`` over ``recordings`` on Dask; outputs and ``summary.csv`` in ``outdir``.
@@ -265,6 +313,9 @@ def run_batch(command: str, recordings: Sequence[str], options: str | Sequence[s
         A running Dask scheduler's address (``tcp://host:8786``).
     force : bool
         Run every recording, even those with an up-to-date output.
+    chunk : int, optional
+        ``detect`` only: split each recording into tasks of this many frames (``--frame-range``),
+        their outputs concatenated in frame order: the same file as one task's, line for line.
     progress : callable, optional
         Called with each :class:`RecordingResult` as it arrives.
     dashboard : callable, optional
@@ -276,8 +327,11 @@ def run_batch(command: str, recordings: Sequence[str], options: str | Sequence[s
         Skipped ones first, then in the order they finished.
     """
     opts = shlex.split(options) if isinstance(options, str) else list(options)
-    if any(o in ("--out", "--quiet") for o in opts):
-        raise UsageError("batch writes each recording's --out itself: leave --out and --quiet out of --options")
+    if any(o in ("--out", "--quiet", "--frame-range") for o in opts):
+        raise UsageError("batch writes each recording's --out (and --frame-range) itself: leave --out, --quiet and "
+                         "--frame-range out of --options")
+    if chunk is not None and (command != "detect" or chunk < 1):
+        raise UsageError("--chunk needs detect (the other commands carry a filter from frame to frame) and >= 1 frame")
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     todo, results = plan(command, recordings, opts, out, force=force)
@@ -301,11 +355,27 @@ def run_batch(command: str, recordings: Sequence[str], options: str | Sequence[s
                 client = stack.enter_context(dd.Client(cluster))
             if dashboard is not None and _has_dashboard(client):
                 dashboard(client.dashboard_link)
-            futures = [client.submit(run_one, command, rec, opts, target, pure=False, key=f"visloc-{i}-{Path(rec).name}")
-                       for i, (rec, target) in enumerate(todo)]
+            futures, owner = [], {}
+            pending: dict[int, list] = {}
+            for i, (rec, target) in enumerate(todo):
+                ranges = _chunks(rec, chunk)
+                pending[i] = [None] * len(ranges)
+                for k, (a, b) in enumerate(ranges):
+                    extra = [] if len(ranges) == 1 else ["--frame-range", f"{a}:{'' if b is None else b}"]
+                    out_k = target if len(ranges) == 1 else f"{target}.chunk{k:05d}"
+                    fut = client.submit(run_one, command, rec, [*opts, *extra], out_k, pure=False,
+                                        key=f"visloc-{i}-{k}-{Path(rec).name}")
+                    futures.append(fut)
+                    owner[fut.key] = (i, k)
             try:
                 for fut in dd.as_completed(futures):
-                    res = fut.result()
+                    i, k = owner[fut.key]
+                    pending[i][k] = fut.result()
+                    if any(p is None for p in pending[i]):
+                        continue
+                    rec, target = todo[i]
+                    parts = pending[i]
+                    res = parts[0] if len(parts) == 1 else _merge(rec, target, parts, command)
                     results.append(res)
                     if progress is not None:
                         progress(res)

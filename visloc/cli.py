@@ -72,6 +72,18 @@ def _size(text: str) -> tuple[int, int]:
     return w, h
 
 
+def _frame_range(text: str) -> tuple[int, int | None]:
+    """``START:STOP`` (frame indices, STOP excluded) or ``START:`` (to the end)."""
+    a, sep, b = text.partition(":")
+    try:
+        start, stop = int(a), (int(b) if b.strip() else None)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected START:STOP or START: (frame indices), got {text!r}") from None
+    if not sep or start < 0 or (stop is not None and stop <= start):
+        raise argparse.ArgumentTypeError(f"expected START:STOP with 0 <= START < STOP, or START:, got {text!r}")
+    return start, stop
+
+
 def _count(text: str) -> int:
     try:
         v = int(text)
@@ -141,6 +153,9 @@ def _add_detect(sub: argparse._SubParsersAction) -> None:
                    help="send the --target-id marker as LANDING_TARGET (precision landing) to a flight stack: a "
                         "pymavlink connection string (default udpout:127.0.0.1:14550; needs visloc[mavlink])")
     d.add_argument("--target-id", type=int, metavar="N", help="the landing pad's marker id (with --mavlink)")
+    d.add_argument("--frame-range", type=_frame_range, metavar="START:STOP",
+                   help="only frames START <= index < STOP (START: to the end), with their indices and times in the "
+                        "whole source (visloc batch --chunk splits a video this way)")
     _detection_tail(d)
 
 
@@ -297,6 +312,9 @@ def _add_batch(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--workers", type=_count, metavar="N", help="local worker processes (default: one per core)")
     b.add_argument("--scheduler", metavar="ADDRESS", help="a running Dask scheduler, e.g. tcp://10.0.0.5:8786")
     b.add_argument("--force", action="store_true", help="run every recording, even those with an up-to-date output")
+    b.add_argument("--chunk", type=_count, metavar="FRAMES",
+                   help="detect only: split each recording into tasks of FRAMES frames; the outputs are joined in "
+                        "frame order (the same file as one task's)")
     b.add_argument("--quiet", action="store_true", help="no progress bar or summary")
 
 
@@ -446,8 +464,7 @@ def check_outputs(args: argparse.Namespace) -> None:
 
     Parameters
     ----------
-    args : argparse.Namespace
-        A parsed command line (:func:`build_parser`).
+    args : as :func:`check_inputs`
 
     Raises
     ------

@@ -48,7 +48,9 @@ def detector_for(args: argparse.Namespace) -> MarkerDetector:
 
 def frames_of(source, args: argparse.Namespace):
     """The frames of an open source with a progress bar (unless ``--quiet``), stopping after
-    ``--max-frames``. From the first frame on, ``args.started`` is True: the inputs were
+    ``--max-frames``; with ``--frame-range START:STOP`` only the frames whose index is in
+    ``[START, STOP)`` (the source is read from its start, so each frame keeps the index, time
+    and name it has in the whole source). From the first frame on, ``args.started`` is True: the inputs were
     accepted, so an exception from here on is visloc's fault (:func:`visloc.cli.main` reports
     a ``ValueError`` as an internal error then, not as a usage error)."""
     try:
@@ -57,9 +59,14 @@ def frames_of(source, args: argparse.Namespace):
         total = None
     if args.max_frames:
         total = min(total, args.max_frames) if total else args.max_frames
+    start, stop = getattr(args, "frame_range", None) or (0, None)
     bar = tqdm(source, total=total, unit="frame", disable=True if args.quiet else None, file=sys.stderr)
     for n, frame in enumerate(bar):
         if args.max_frames and n >= args.max_frames:
+            break
+        if frame.index < start:  # read, not processed: indices and times stay the whole source's
+            continue
+        if stop is not None and frame.index >= stop:
             break
         args.started = True
         yield frame

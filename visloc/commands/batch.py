@@ -44,7 +44,7 @@ def batch(args: argparse.Namespace) -> int:
 
     try:
         results = run_batch(args.batch_command, recordings, args.options, args.outdir, workers=args.workers,
-                            scheduler=args.scheduler, force=args.force, progress=progress,
+                            scheduler=args.scheduler, force=args.force, chunk=args.chunk, progress=progress,
                             dashboard=None if args.quiet else lambda url: tqdm.write(f"visloc batch: Dask dashboard at {url}",
                                                                                      file=sys.stderr))
     finally:

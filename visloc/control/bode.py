@@ -112,10 +112,7 @@ def bode(
     w : array_like (N,), optional
         Frequencies, rad/s (finite, > 0, N >= 2); default 600 points log-spaced over
         0.01-1000 rad/s.
-    gains : ControllerGains, optional
-        Default :func:`visloc.control.design_gains` of ``params``.
-    params : ARDrone2Params
-        Vehicle parameters (mass, inertia, g).
+    gains, params : as :func:`frequency_response`
 
     Returns
     -------
@@ -152,12 +149,7 @@ def loop_margins(
 
     Parameters
     ----------
-    loop : str
-        See :func:`frequency_response`.
-    gains : ControllerGains, optional
-        Default :func:`visloc.control.design_gains` of ``params``.
-    params : ARDrone2Params
-        Vehicle parameters (mass, inertia, g).
+    loop, gains, params : as :func:`frequency_response`
 
     Returns
     -------
@@ -207,10 +199,7 @@ def save_bode_png(
     loops : tuple of str
         Loops to draw side by side (names as for :func:`frequency_response`); default the
         report's Figures 4.2 and 4.3.
-    gains : ControllerGains, optional
-        Default :func:`visloc.control.design_gains` of ``params``.
-    params : ARDrone2Params
-        Vehicle parameters (mass, inertia, g).
+    gains, params : as :func:`frequency_response`
 
     Returns
     -------

@@ -128,10 +128,7 @@ def instantaneous_rotation(field: FlowField, *, min_confidence: float = 0.2) -> 
 
     Parameters
     ----------
-    field : FlowField
-        Block flow (:func:`visloc.flow.block_flow`), px.
-    min_confidence : float
-        Blocks of lower confidence are left out.
+    field, min_confidence : as :func:`similarity_fit`
 
     Returns
     -------

@@ -187,12 +187,7 @@ def read_cells(gray: NDArray[np.uint8], quads: NDArray, n: int, *, per_side: int
 
     Parameters
     ----------
-    gray : ndarray (H, W) uint8
-        Grey image.
-    quads : ndarray (K, 4, 2) or (4, 2)
-        Corners ``(x, y)``, px, pixel centres at integer coordinates, clockwise in the image,
-        corner 0 the grid's top-left: the outer corners of the cell area (as
-        :func:`sample_cells`). They must be finite.
+    gray, quads : as :func:`sample_cells`
     n : int
         Cells per side including the black border (bits per side + 2 ``border``).
     per_side : int
@@ -257,11 +252,7 @@ def cell_white_fractions(gray: NDArray[np.uint8], quads: NDArray, n: int, thresh
 
     Parameters
     ----------
-    gray : ndarray (H, W) uint8
-        Grey image.
-    quads : ndarray (K, 4, 2) or (4, 2)
-        Corners ``(x, y)``, px, pixel centres at integer coordinates, clockwise in the image,
-        corner 0 the grid's top-left (as :func:`sample_cells`).
+    gray, quads : as :func:`sample_cells`
     n : int
         Cells per side including the border.
     threshold : ndarray (K,)

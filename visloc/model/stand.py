@@ -127,8 +127,7 @@ def stand_derivatives(state: ArrayLike, u: ArrayLike, params: ARDrone2Params, *,
     Raises
     ------
     TypeError
-        ``state`` or ``u`` not real numbers, ``params`` not an :class:`ARDrone2Params`,
-        ``gyroscopic`` not a bool.
+        As :func:`visloc.model.derivatives`.
     ValueError
         ``state`` not (6,) or ``u`` not (4,), or not finite; ``l`` not a finite number;
         ``theta`` at the Z-Y-X singularity.
@@ -168,10 +167,8 @@ def stand_linear(params: ARDrone2Params, l: float) -> tuple[FloatArray, FloatArr
 
     Raises
     ------
-    TypeError
-        ``params`` is not an :class:`ARDrone2Params`.
-    ValueError
-        ``l`` is not a finite number.
+    TypeError, ValueError
+        As :func:`stand_inertia`.
     """
     p = check_params(params)
     inertia = stand_inertia(p, l)

@@ -82,22 +82,18 @@ def save_plot(result: SimResult, path: str | os.PathLike[str]) -> Path:
 
     Parameters
     ----------
-    result : SimResult
-        The run to write.
-    path : str or os.PathLike
-        Output file; must end in ``.png``. Missing parent directories are created.
+    result, path : as :func:`write_csv`
+        Except that ``path`` must end in ``.png``.
 
     Returns
     -------
     Path
-        ``path`` as a :class:`pathlib.Path`.
+        The ``.png`` file, as for :func:`write_csv`.
 
     Raises
     ------
-    TypeError
-        ``path`` is not a str or os.PathLike.
-    ValueError
-        ``path`` does not end in ``.png``.
+    TypeError, ValueError
+        As :func:`write_csv` (``path`` not a ``.png`` file).
     ImportError
         matplotlib is not installed.
     """
@@ -144,22 +140,18 @@ def save_rerun(result: SimResult, path: str | os.PathLike[str]) -> Path:
 
     Parameters
     ----------
-    result : SimResult
-        The run to write.
-    path : str or os.PathLike
-        Output file; must end in ``.rrd``. Missing parent directories are created.
+    result, path : as :func:`write_csv`
+        Except that ``path`` must end in ``.rrd``.
 
     Returns
     -------
     Path
-        ``path`` as a :class:`pathlib.Path`.
+        The ``.rrd`` file, as for :func:`write_csv`.
 
     Raises
     ------
-    TypeError
-        ``path`` is not a str or os.PathLike.
-    ValueError
-        ``path`` does not end in ``.rrd``.
+    TypeError, ValueError
+        As :func:`write_csv` (``path`` not a ``.rrd`` file).
     """
     import rerun as rr
     from scipy.spatial.transform import Rotation

@@ -148,10 +148,7 @@ def render_aprilgrid(
 
     Parameters
     ----------
-    K : ndarray (3, 3)
-        Camera matrix (the pinhole part of the camera).
-    size : (int, int)
-        ``(width, height)`` of the image.
+    K, size : as :func:`~visloc.synth.markers.render_markers`
     pose : Pose
         Board-to-camera transform (board frame in the module docstring: origin at the
         top-left corner of the first tag, x right, y up, z out of the face). A board seen
@@ -194,7 +191,8 @@ def render_aprilgrid(
     Raises
     ------
     TypeError, ValueError
-        On a malformed argument; the message names it.
+        On a malformed argument, or when the dictionary does not hold ``rows * cols`` ids
+        from ``first_id`` on; the message names it.
     """
     k = check_camera(K)
     w, h = check_size(size)

@@ -269,7 +269,7 @@ def straight_track(
     Returns
     -------
     FlightTrack
-        Poses and exact motion at the frame times (module docstring for the frames).
+        As for :func:`flight_trajectory`.
 
     Raises
     ------

@@ -242,6 +242,11 @@ def _add_flow(sub: argparse._SubParsersAction) -> None:
                     help="add the sub-pixel stage (direct alignment of the similarity): more accurate, slower")
     fl.add_argument("--out", metavar="FILE.csv", help="write one row per frame")
     fl.add_argument("--rerun", metavar="FILE.rrd", help="write a rerun recording")
+    gy = fl.add_mutually_exclusive_group()
+    gy.add_argument("--imu", metavar="FILE.csv", help="IMU log (t,gx,gy,gz,... rad/s in camera axes): each pair's "
+                                                    "roll and pitch rotation is removed from its flow")
+    gy.add_argument("--imu-topic", metavar="TOPIC", help="the sensor_msgs/Imu topic of a ROS bag or MCAP source, as "
+                                                         "--imu (its axes taken as the camera's)")
     fl.add_argument("--mavlink", nargs="?", const="udpout:127.0.0.1:14550", metavar="URL",
                     help="send each pair's flow as OPTICAL_FLOW_RAD (camera axes) to a flight stack: a pymavlink "
                          "connection string (default udpout:127.0.0.1:14550; needs visloc[mavlink])")

@@ -219,3 +219,32 @@ def test_flow_sends_each_pair_as_optical_flow_rad(tmp_path):
         assert m.integrated_x == pytest.approx(-float(r["vy"]) * dt / h, rel=1e-5, abs=1e-9)
         assert m.quality == round(255 * float(r["quality"])) and m.distance == pytest.approx(h, rel=1e-6)
         assert math.isnan(m.integrated_xgyro)
+
+
+def test_flow_with_an_imu_sends_the_gyro_integrals_and_the_rotation_back_in_the_flow(tmp_path):
+    src = tmp_path / "ground"
+    assert main(["render", "flow", str(src), "--seconds", "0.2", "--fps", "30", "--seed", "5"]) == 0
+    rates = np.array([0.02, -0.01, 0.3])  # rad/s in camera axes, constant
+    t = np.arange(0, 0.5, 0.005)
+    imu = tmp_path / "imu.csv"
+    np.savetxt(imu, np.column_stack([t, np.tile(rates, (len(t), 1)), np.zeros((len(t), 3))]), delimiter=",",
+               header="t,gx,gy,gz,fx,fy,fz", comments="", fmt="%.6g")
+    port = _free_port()
+    rx = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", dialect="common")
+    out = tmp_path / "v.csv"
+    assert main(["flow", str(src), "--fps", "30", "--camera", str(src / "camera.yml"), "--height-csv",
+                 str(src / "heights.csv"), "--imu", str(imu), "--out", str(out), "--mavlink",
+                 f"udpout:127.0.0.1:{port}", "--quiet"]) == 0
+    flows = [m for m in _receive(rx) if m.get_type() == "OPTICAL_FLOW_RAD"]
+    rx.close()
+    rows = list(csv.DictReader(out.open()))[1:]
+    heights = {int(r["frame"]): float(r["height"]) for r in csv.DictReader((src / "heights.csv").open())}
+    assert len(flows) == len(rows) >= 5
+    dt = 1 / 30
+    for m, r in zip(flows, rows, strict=True):
+        h = heights[int(r["frame"])]
+        w = rates * dt
+        assert (m.integrated_xgyro, m.integrated_ygyro, m.integrated_zgyro) == pytest.approx(w, rel=1e-5)
+        # the CSV's velocity has the roll and pitch rotation removed; the message puts it back
+        assert m.integrated_x == pytest.approx(-float(r["vy"]) * dt / h + w[0], rel=1e-5, abs=1e-8)
+        assert m.integrated_y == pytest.approx(float(r["vx"]) * dt / h + w[1], rel=1e-5, abs=1e-8)

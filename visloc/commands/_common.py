@@ -137,3 +137,46 @@ def read_columns(path: str, option: str, columns: tuple[str, ...]) -> dict[str, 
             except ValueError:
                 pass
     return {k: data[:, j] for j, k in enumerate(columns)}
+
+
+def finite_rows(path: str, option: str, columns: tuple[str, ...], command: str) -> np.ndarray:
+    """(M, len(columns)) of the CSV's rows whose named fields are all finite numbers, in file
+    order; the others (NaN, inf, text, a wrong field count) are said on one warning line. The
+    first column is a time: it must increase (else a :class:`visloc.cli.UsageError`)."""
+    from visloc.errors import UsageError
+
+    cols = read_columns(path, option, columns)
+    rows = np.column_stack([cols[k] for k in columns])
+    good = np.isfinite(rows).all(axis=1)
+    if not good.all():  # said, not silently dropped
+        bad = np.flatnonzero(~good) + 2  # file line numbers (the header is line 1)
+        shown = ", ".join(map(str, bad[:5])) + (" ..." if len(bad) > 5 else "")
+        warn(command, f"{option} {path}: {len(bad)} rows without finite numbers skipped (lines {shown})")
+    rows = rows[good]
+    if len(rows) == 0 or (np.diff(rows[:, 0]) <= 0).any():
+        raise UsageError(f"{option} {path}: times must be finite and increasing")
+    return rows
+
+
+#: The columns of an IMU log (``visloc render localize``'s ``imu.csv``, :func:`visloc.io.bags.read_bag_imu`).
+IMU_COLUMNS = ("t", "gx", "gy", "gz", "fx", "fy", "fz")
+
+
+def imu_input(args: argparse.Namespace, columns: tuple[str, ...], command: str) -> np.ndarray | None:
+    """(M, len(columns)) IMU samples from ``--imu`` (a CSV with an ``IMU_COLUMNS`` header) or
+    ``--imu-topic`` (the source recording's ``sensor_msgs/Imu``, its axes taken as the
+    camera's), or None when neither is given."""
+    from visloc.errors import UsageError
+
+    if getattr(args, "imu", None):
+        return finite_rows(args.imu, "--imu", columns, command)
+    if not getattr(args, "imu_topic", None):
+        return None
+    from visloc.io.bags import is_recording, read_bag_imu
+
+    if not is_recording(args.source):
+        raise UsageError(f"--imu-topic reads a ROS bag or MCAP source; {args.source} is not one")
+    imu = read_bag_imu(args.source, topic=args.imu_topic, image_topic=args.topic)
+    if len(imu) == 0:
+        raise UsageError(f"--imu-topic {args.imu_topic}: no IMU messages")
+    return imu[:, [IMU_COLUMNS.index(c) for c in columns]]

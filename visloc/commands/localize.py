@@ -13,9 +13,10 @@ from visloc.commands._common import (
     camera_for,
     detector_for,
     dictionary_for,
+    finite_rows,
     frames_of,
+    imu_input,
     open_timed_source,
-    read_columns,
     warn,
 )
 from visloc.errors import UsageError
@@ -65,27 +66,6 @@ def render_localize(args: argparse.Namespace) -> int:
           f"ground_truth.csv to {out}")
     return 0
 
-def _finite_rows(path: str, option: str, columns: tuple[str, ...]) -> np.ndarray:
-    """(M, len(columns)) of the CSV's rows whose named fields are all finite numbers, in file
-    order; the others (NaN, inf, text, a wrong field count) are said on one warning line."""
-    cols = read_columns(path, option, columns)
-    rows = np.column_stack([cols[k] for k in columns])
-    good = np.isfinite(rows).all(axis=1)
-    if not good.all():  # said, not silently dropped
-        bad = np.flatnonzero(~good) + 2  # file line numbers (the header is line 1)
-        shown = ", ".join(map(str, bad[:5])) + (" ..." if len(bad) > 5 else "")
-        warn("localize", f"{option} {path}: {len(bad)} rows without finite numbers skipped (lines {shown})")
-    rows = rows[good]
-    if len(rows) == 0 or (np.diff(rows[:, 0]) <= 0).any():
-        raise UsageError(f"{option} {path}: times must be finite and increasing")
-    return rows
-
-
-def _read_imu(path: str) -> np.ndarray:
-    """(M, 4) ``t, fx, fy, fz`` (specific force in camera axes, m/s^2) from an IMU CSV with
-    columns ``t,gx,gy,gz,fx,fy,fz`` (as ``visloc render localize`` writes), sorted by time."""
-    return _finite_rows(path, "--imu", ("t", "fx", "fy", "fz"))
-
 def localize(args: argparse.Namespace) -> int:
     """``visloc localize``: the camera's position over a marker map per frame, filtered by a
     constant-velocity Kalman filter (filterpy) into position and velocity with uncertainty.
@@ -112,9 +92,9 @@ def localize(args: argparse.Namespace) -> int:
     camera = Camera.from_file(args.camera)
     truth = None
     if args.truth:
-        truth = dict(zip(("t", "x", "y", "z"), _finite_rows(args.truth, "--truth", ("t", "x", "y", "z")).T,
+        truth = dict(zip(("t", "x", "y", "z"), finite_rows(args.truth, "--truth", ("t", "x", "y", "z"), "localize").T,
                          strict=True))
-    imu = _imu_input(args)
+    imu = imu_input(args, ("t", "fx", "fy", "fz"), "localize")
     fusion = MapFixFusion(accel_noise=args.accel_noise)  # the map's z axis points up: gravity (0, 0, -9.81)
     R_map_cam = None
     last_t = None
@@ -179,23 +159,6 @@ def localize(args: argparse.Namespace) -> int:
         print(f"visloc localize: {n_frames} frames, {fixes} position fixes, {failed} unreadable{used}{err}",
               file=sys.stderr)
     return 1 if failed else 0
-
-def _imu_input(args: argparse.Namespace) -> np.ndarray | None:
-    """(M, 4) ``t, fx, fy, fz`` from ``--imu`` (a CSV) or ``--imu-topic`` (the source recording's
-    ``sensor_msgs/Imu``), or None."""
-    if args.imu:
-        return _read_imu(args.imu)
-    if not getattr(args, "imu_topic", None):
-        return None
-    from visloc.io.bags import is_recording, read_bag_imu
-
-    if not is_recording(args.source):
-        raise UsageError(f"--imu-topic reads a ROS bag or MCAP source; {args.source} is not one")
-    imu = read_bag_imu(args.source, topic=args.imu_topic, image_topic=args.topic)[:, [0, 4, 5, 6]]
-    if len(imu) == 0:
-        raise UsageError(f"--imu-topic {args.imu_topic}: no IMU messages")
-    return imu
-
 
 def _send_fix(link, args: argparse.Namespace, fusion, R_map_cam: np.ndarray, t: float) -> None:
     """The filter's estimate after a fix, to the flight stack (``--mavlink``): position (and

@@ -325,7 +325,7 @@ class MavlinkSink:
             dist, size, size, *body, [1.0, 0.0, 0.0, 0.0], m.LANDING_TARGET_TYPE_VISION_FIDUCIAL, 1))
 
     def send_optical_flow(self, time_s: float, interval_s: float, velocity_cam: ArrayLike, distance_m: float,
-                          quality: float) -> None:
+                          quality: float, *, gyro: ArrayLike | None = None) -> None:
         """``OPTICAL_FLOW_RAD``: a downward camera's flow over one frame interval, as PX4's and
         ArduPilot's flow drivers expect it from a flow sensor.
 
@@ -342,13 +342,19 @@ class MavlinkSink:
             The height above the ground that scaled it, m.
         quality : float
             0-1 (``GroundVelocity.quality``), sent as 0-255.
+        gyro : array_like (3,), optional
+            The mean body rates over the interval in camera axes, rad/s, when ``velocity_cam``
+            had them removed (``EgoMotion.update(gyro=...)``): they are added back to the flow
+            and sent as the gyro integrals. None: the velocity still holds the rotation, and
+            the gyro integrals are NaN (unknown).
 
         Notes
         -----
         The sensor axes are the camera's. Moving along +x gives ``integrated_y = vx dt / h``
-        (positive), moving along +y gives ``integrated_x = -vy dt / h``: the angles the ground
-        turned through as seen by the camera, rotation included, as a flow sensor reports them
-        (the flight stack removes the rotation with its gyro: the gyro integrals are NaN).
+        (positive), moving along +y gives ``integrated_x = -vy dt / h``; a right-handed turn
+        about x or y adds ``wx dt`` or ``wy dt``: the angles the ground turned through as seen
+        by the camera, rotation included, as a flow sensor reports them (the flight stack
+        removes the rotation with the gyro integrals, or its own gyro).
         """
         dt = float(interval_s)
         if not dt > 0 or not math.isfinite(dt):
@@ -356,11 +362,14 @@ class MavlinkSink:
         v = np.asarray(velocity_cam, float).reshape(2)
         h = float(distance_m)
         ok = bool(np.isfinite(v).all() and h > 0 and math.isfinite(h))
+        w = [math.nan] * 3 if gyro is None else [float(g) * dt for g in np.asarray(gyro, float).reshape(3)]
         fx, fy = (-float(v[1]) * dt / h, float(v[0]) * dt / h) if ok else (0.0, 0.0)
+        if ok and gyro is not None:  # the rotation the velocity had removed, back in the flow
+            fx, fy = fx + w[0], fy + w[1]
         q = round(255 * min(1.0, max(0.0, float(quality)))) if ok else 0
         self.heartbeat(time_s)
         self._send(self._mav.MAVLink_optical_flow_rad_message(
-            _usec(time_s), 0, round(dt * 1e6), fx, fy, math.nan, math.nan, math.nan, 0, q, 0,
+            _usec(time_s), 0, round(dt * 1e6), fx, fy, w[0], w[1], w[2], 0, q, 0,
             h if h > 0 and math.isfinite(h) else -1.0))
 
     def close(self) -> None:

@@ -347,9 +347,13 @@ def _add_robust(sub: argparse._SubParsersAction) -> None:
 def _add_sim(sub: argparse._SubParsersAction) -> None:
     """The ``visloc sim`` sub-command's arguments."""
     sm = sub.add_parser("sim", help="closed-loop simulation: model, sensors, visloc's estimators, controller")
-    sm.add_argument("scenario", choices=("hover", "sidestep", "push", "hover-vision"),
+    sm.add_argument("scenario", choices=("hover", "sidestep", "push", "hover-vision", "step"),
                     help="hover 10 s; sidestep: 1 m in y (report Fig. 4.6); push: 4 N for 0.1 s "
-                         "(Fig. 4.5); hover-vision: 30 s on the marker-grid vision pipeline")
+                         "(Fig. 4.5); hover-vision: 30 s on the marker-grid vision pipeline; step: --distance "
+                         "m in y along a minimum-jerk trajectory with feed-forward (--plain: a set-point step)")
+    sm.add_argument("--distance", type=_at_most(100, "a side step in a room or a field"), default=5.0, metavar="M",
+                    help="the step scenario's distance, m (default 5)")
+    sm.add_argument("--plain", action="store_true", help="step: jump the set point as the report does, no trajectory")
     sm.add_argument("--seconds", type=_at_most(3600, "an hour of flight; every control step is kept"),
                     help="simulated duration (default: the scenario's; at most 3600)")
     sm.add_argument("--sigma", type=float, default=0.0, metavar="N",

@@ -159,7 +159,27 @@ class Controller:
         du[0] = dt_limited
         return self.u0 + du, clipped
 
-    def command(self, state: ArrayLike, setpoint: ArrayLike, dt: float) -> FloatArray:
+    def _feed_forward(self, x: FloatArray, psi: float, reference: tuple[ArrayLike, ArrayLike]) -> float:
+        """Shift the error state ``x`` (in place) by a reference motion and return the thrust
+        to add: the reference velocity in the pilot frame, the roll and pitch that give the
+        reference acceleration (``x'' = -g theta``, ``y'' = g phi`` near hover, report eq. 4.1's
+        frame), and the thrust that keeps the height under that tilt."""
+        v_ref = as_array(reference[0], "reference velocity", (3,))
+        a_ref = as_array(reference[1], "reference acceleration", (3,))
+        c, s = math.cos(psi), math.sin(psi)
+        rot = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])  # R_psi^T: A -> pilot frame
+        v_p, a_p = rot @ v_ref, rot @ a_ref
+        g, m = self.params.g, self.params.mass
+        up = g - a_p[2]  # z points down
+        theta = math.atan2(-a_p[0], up)
+        phi = math.atan2(a_p[1] * math.cos(theta), up)
+        x[3:6] -= v_p
+        x[6] -= phi
+        x[7] -= theta
+        return m * up / (math.cos(phi) * math.cos(theta)) - m * g
+
+    def command(self, state: ArrayLike, setpoint: ArrayLike, dt: float, *,
+                reference: tuple[ArrayLike, ArrayLike] | None = None) -> FloatArray:
         """Advance the integrators by ``dt`` and return ``u = [T, tau_x, tau_y, tau_z]`` (4,).
 
         Parameters
@@ -170,6 +190,11 @@ class Controller:
             ``[x, y, z, psi]`` in A, m and rad.
         dt : float
             Time since the previous call, s (>= 0; 0 leaves the integrators alone).
+        reference : (array_like (3,), array_like (3,)), optional
+            The reference's velocity (m/s) and acceleration (m/s^2) in A at this time, when
+            ``setpoint`` is a moving reference's position (:class:`visloc.control.trajectory.
+            MinJerkTrajectory`): the feedback then acts on the errors from the reference
+            motion, and the tilt and thrust that motion needs are fed forward.
 
         Returns
         -------
@@ -178,6 +203,7 @@ class Controller:
         """
         step = check_real(dt, "dt", nonneg=True)
         x = self.error_state(state, setpoint)
+        thrust_ff = 0.0 if reference is None else self._feed_forward(x, float(np.asarray(state, float)[8]), reference)
         _, clipped = self._inputs(x, self._integral)
         e = np.array([x[0], x[1], x[2], x[8]])
         rate = np.array([x[3], x[4], x[5], x[11]])
@@ -185,14 +211,16 @@ class Controller:
         frozen = clipped | moving
         self._integral = np.where(frozen, self._integral, self._integral + e * step)  # §4.2.3
         u, _ = self._inputs(x, self._integral)
+        u[0] += thrust_ff
         return u
 
-    def pwm(self, state: ArrayLike, setpoint: ArrayLike, dt: float) -> PwmResult:
+    def pwm(self, state: ArrayLike, setpoint: ArrayLike, dt: float, *,
+            reference: tuple[ArrayLike, ArrayLike] | None = None) -> PwmResult:
         """:meth:`command` turned into motor commands, ``pwm = sqrt(Gamma^-1 u) - k`` (eq. 4.6).
 
         Parameters
         ----------
-        state, setpoint, dt
+        state, setpoint, dt, reference
             As for :meth:`command`.
 
         Returns
@@ -201,5 +229,5 @@ class Controller:
             Commands of motors 1-4 in percent, with saturation flags
             (:func:`visloc.model.pwm_from_inputs`, using the mean-coefficient mixer).
         """
-        u = self.command(state, setpoint, dt)
+        u = self.command(state, setpoint, dt, reference=reference)
         return pwm_from_inputs(u, self.params, gamma=self.gamma)  # report eq. (4.6)

@@ -248,7 +248,7 @@ def simulate(
                 estimator.observe(s)  # type: ignore[union-attr]
             sp = sc.setpoint(t)
             x_hat = estimator.state
-            cmd = controller.pwm(x_hat, sp, ctrl_dt)  # report eqs. (4.5)-(4.6)
+            cmd = controller.pwm(x_hat, sp, ctrl_dt, reference=sc.reference(t))  # report eqs. (4.5)-(4.6)
             states[k], estimates[k], setpoints[k], pwms[k] = s, x_hat, sp, cmd.pwm
             saturated[k] = cmd.saturated
             done = k + 1
@@ -274,7 +274,7 @@ def simulate(
     if sensors is not None:
         metrics.update(camera_frames=sensors.frames, vision_fixes=estimator.fixes,  # type: ignore[union-attr]
                        vision_misses=estimator.misses)  # type: ignore[union-attr]
-    if sc.step is not None:
+    if sc.step is not None and sc.trajectory is None:  # the linear model's answer to the same set-point step
         metrics.update(step_metrics_linear(controller.gains, p, sc, duration))
     status, reason = ended if ended is not None else _ran_out(sc, metrics, duration)
     motors = {"c": [float(v) for v in c], "d": [float(v) for v in d], "sigma": float(sigma)}

@@ -6,9 +6,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from visloc.control.trajectory import MinJerkTrajectory, TrajectoryLimits, model_limits
 from visloc.types import FloatArray
 
-__all__ = ["SCENARIOS", "Scenario", "get_scenario"]
+__all__ = ["SCENARIOS", "Scenario", "get_scenario", "step_scenario"]
 
 HOVER_HEIGHT = 1.0
 """Height of every scenario's hover point above the floor, m (NED ``z = -1``)."""
@@ -35,6 +36,10 @@ class Scenario:
         Standard deviation of a random horizontal force (N), low-passed at 1 Hz: air turbulence.
     band : float
         Settling band, m: 5 % of a step, or an absolute tolerance without one.
+    trajectory : MinJerkTrajectory or None
+        A smooth reference (:mod:`visloc.control.trajectory`): the set point follows its
+        position and the controller gets its velocity and acceleration (feed-forward);
+        ``step`` then names where it ends.
     """
 
     name: str
@@ -45,6 +50,7 @@ class Scenario:
     estimator: str = "truth"
     gust_std: float = 0.0
     band: float = 0.05
+    trajectory: MinJerkTrajectory | None = None
 
     @property
     def start_setpoint(self) -> FloatArray:
@@ -53,9 +59,18 @@ class Scenario:
 
     def setpoint(self, t: float) -> FloatArray:
         """``[x, y, z, psi]`` at time ``t``."""
+        if self.trajectory is not None:
+            return np.r_[self.trajectory.sample(t)[0], self.start_setpoint[3]]
         if self.step is not None and t >= self.step[0]:
             return self.step[1]
         return self.start_setpoint
+
+    def reference(self, t: float) -> tuple[FloatArray, FloatArray] | None:
+        """The trajectory's velocity and acceleration at ``t`` (A frame), or None without one."""
+        if self.trajectory is None:
+            return None
+        _, v, a, _ = self.trajectory.sample(t)
+        return v, a
 
     def force(self, t: float) -> FloatArray | None:
         """The push force on the CoG at ``t`` (N, A frame), or None."""
@@ -78,6 +93,44 @@ SCENARIOS: dict[str, Scenario] = {
     )
 }
 """The scenarios by name."""
+
+
+def step_scenario(distance: float, *, smooth: bool = True, start: float = 1.0, limits: TrajectoryLimits | None = None,
+                  settle: float = 4.0) -> Scenario:
+    """A side step of ``distance`` m in y from hover at ``start`` s: along a minimum-jerk
+    trajectory within :func:`visloc.control.trajectory.model_limits` with feed-forward
+    (``smooth``), or as the report's plain set-point step.
+
+    Parameters
+    ----------
+    distance : float
+        m (> 0).
+    smooth : bool
+        Fly the trajectory (True) or jump the set point (False).
+    start : float
+        When the move starts, s.
+    limits : TrajectoryLimits, optional
+        Default :func:`visloc.control.trajectory.model_limits`.
+    settle : float
+        Seconds simulated after the trajectory's end (or after the step).
+
+    Returns
+    -------
+    Scenario
+        Named ``step``; its ``step`` is ``(end of the move, target)`` so that settling is
+        measured from there, with a 5 % band.
+    """
+    d = float(distance)
+    if not (0.0 < d < 100.0):
+        raise ValueError(f"distance must be in (0, 100) m, got {distance!r}")
+    target = np.array([0.0, d, -HOVER_HEIGHT, 0.0])
+    if not smooth:
+        return Scenario("step", f"a {d:g} m set-point step in y at t = {start:g} s", start + settle,
+                        step=(start, target), band=0.05 * d)
+    traj = MinJerkTrajectory([[0.0, 0.0, -HOVER_HEIGHT], target[:3]], limits or model_limits(), start=start)
+    return Scenario("step", f"a {d:g} m side step in y along a minimum-jerk trajectory ({traj.end - start:.2f} s) "
+                            f"with feed-forward", traj.end + settle, step=(traj.end, target), band=0.05 * d,
+                    trajectory=traj)
 
 
 def get_scenario(name: str) -> Scenario:

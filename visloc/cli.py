@@ -347,13 +347,18 @@ def _add_robust(sub: argparse._SubParsersAction) -> None:
 def _add_sim(sub: argparse._SubParsersAction) -> None:
     """The ``visloc sim`` sub-command's arguments."""
     sm = sub.add_parser("sim", help="closed-loop simulation: model, sensors, visloc's estimators, controller")
-    sm.add_argument("scenario", choices=("hover", "sidestep", "push", "hover-vision", "step"),
+    sm.add_argument("scenario", choices=("hover", "sidestep", "push", "hover-vision", "step", "square"),
                     help="hover 10 s; sidestep: 1 m in y (report Fig. 4.6); push: 4 N for 0.1 s "
                          "(Fig. 4.5); hover-vision: 30 s on the marker-grid vision pipeline; step: --distance "
-                         "m in y along a minimum-jerk trajectory with feed-forward (--plain: a set-point step)")
+                         "m in y along a minimum-jerk trajectory with feed-forward (--plain: a set-point step); square: "
+                         "--side m at up to --speed m/s (--vision: on the marker-grid vision)")
     sm.add_argument("--distance", type=_at_most(100, "a side step in a room or a field"), default=5.0, metavar="M",
                     help="the step scenario's distance, m (default 5)")
     sm.add_argument("--plain", action="store_true", help="step: jump the set point as the report does, no trajectory")
+    sm.add_argument("--side", type=_at_most(100, "a square in a room or a field"), default=1.25, metavar="M",
+                    help="the square scenario's side, m (default 1.25)")
+    sm.add_argument("--speed", type=_positive, default=0.5, metavar="M/S", help="the square's speed limit (default 0.5)")
+    sm.add_argument("--vision", action="store_true", help="square: fly on visloc's marker-grid vision")
     sm.add_argument("--seconds", type=_at_most(3600, "an hour of flight; every control step is kept"),
                     help="simulated duration (default: the scenario's; at most 3600)")
     sm.add_argument("--sigma", type=float, default=0.0, metavar="N",

@@ -64,3 +64,18 @@ def test_a_5_m_side_step_along_the_trajectory_against_the_plain_set_point_step()
     assert plain.metrics["max_tilt_deg"] > 2 * m["max_tilt_deg"]
     with pytest.raises(ValueError, match="distance"):
         step_scenario(-1.0)
+
+
+def test_the_square_is_tracked_closely_on_spread_motors(capsys):
+    from visloc.cli import main
+    from visloc.sim import square_scenario
+
+    sc = square_scenario(0.5, speed=0.5)  # small: the test's time (bench/sim.py flies 1.25 m on vision)
+    r = simulate(sc, sigma=2.0, seed=3)
+    assert r.status is SimStatus.SETTLED and r.metrics["position_rms_m"] <= 0.03  # issue 20: tracking RMS <= 3 cm
+    corners = r.setpoint[:, :2]
+    assert np.abs(corners).max() == pytest.approx(0.25, abs=1e-9)  # it went round the corners
+    with pytest.raises(ValueError, match="side"):
+        square_scenario(0.0)
+    assert main(["sim", "square", "--side", "0.5", "--json"]) == 0
+    assert '"scenario": "square"' in capsys.readouterr().out

@@ -12,7 +12,7 @@ with :class:`visloc.control.Controller` and returns a :class:`SimResult` with a
 from visloc.sim.estimators import TruthEstimator, VisionEstimator
 from visloc.sim.loop import SIM_GRID, SimResult, SimStatus, simulate
 from visloc.sim.metrics import linear_step_response, settling_time
-from visloc.sim.scenarios import SCENARIOS, Scenario, get_scenario, step_scenario
+from visloc.sim.scenarios import SCENARIOS, Scenario, get_scenario, square_scenario, step_scenario
 from visloc.sim.sensors import BODY_TO_CAMERA, MAP_FROM_NED, BottomCamera, Imu, Ultrasound
 from visloc.sim.vehicle import Vehicle, motor_coefficients
 
@@ -35,5 +35,6 @@ __all__ = [
     "motor_coefficients",
     "settling_time",
     "simulate",
+    "square_scenario",
     "step_scenario",
 ]

@@ -9,7 +9,7 @@ import numpy as np
 from visloc.control.trajectory import MinJerkTrajectory, TrajectoryLimits, model_limits
 from visloc.types import FloatArray
 
-__all__ = ["SCENARIOS", "Scenario", "get_scenario", "step_scenario"]
+__all__ = ["SCENARIOS", "Scenario", "get_scenario", "square_scenario", "step_scenario"]
 
 HOVER_HEIGHT = 1.0
 """Height of every scenario's hover point above the floor, m (NED ``z = -1``)."""
@@ -131,6 +131,41 @@ def step_scenario(distance: float, *, smooth: bool = True, start: float = 1.0, l
     return Scenario("step", f"a {d:g} m side step in y along a minimum-jerk trajectory ({traj.end - start:.2f} s) "
                             f"with feed-forward", traj.end + settle, step=(traj.end, target), band=0.05 * d,
                     trajectory=traj)
+
+
+def square_scenario(side: float = 1.25, *, speed: float = 0.5, vision: bool = False, start: float = 1.0,
+                    limits: TrajectoryLimits | None = None) -> Scenario:
+    """Fly a square of ``side`` m around the hover point along minimum-jerk segments (resting
+    at each corner) at up to ``speed`` m/s, then back to the hover point.
+
+    Parameters
+    ----------
+    side : float
+        m (> 0; with ``vision`` the view must stay over the printed grid: up to about 1.3 m).
+    speed : float
+        Speed limit, m/s (> 0).
+    vision : bool
+        Fly on visloc's marker-grid vision (the bottom camera over :data:`visloc.sim.SIM_GRID`,
+        light turbulence) instead of the true state.
+    start : float
+        When the square starts, s.
+    limits : TrajectoryLimits, optional
+        Default :func:`visloc.control.trajectory.model_limits` with ``speed``.
+
+    Returns
+    -------
+    Scenario
+        Named ``square``; 2 s after the return; ``position_rms_m`` is the tracking RMS.
+    """
+    s = float(side)
+    if not (0.0 < s < 100.0):
+        raise ValueError(f"side must be in (0, 100) m, got {side!r}")
+    h, z = 0.5 * s, -HOVER_HEIGHT
+    corners = [[0.0, 0.0, z], [-h, -h, z], [h, -h, z], [h, h, z], [-h, h, z], [-h, -h, z], [0.0, 0.0, z]]
+    traj = MinJerkTrajectory(corners, limits or model_limits(speed=speed), start=start)
+    return Scenario("square", f"a {s:g} m square at up to {speed:g} m/s along minimum-jerk segments"
+                              + (" on visloc's vision" if vision else ""), traj.end + 2.0,
+                    estimator="vision" if vision else "truth", gust_std=0.05 if vision else 0.0, trajectory=traj)
 
 
 def get_scenario(name: str) -> Scenario:

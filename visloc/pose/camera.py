@@ -302,9 +302,11 @@ class Camera:
         p = _as_points(points, 2, "points")
         if not self.has_distortion:
             return (p - self.K[:2, 2]) / self.K[[0, 1], [0, 1]]
-        out = cv2.undistortPoints(
-            p.reshape(-1, 1, 2), self.K, self.dist, criteria=_UNDISTORT_CRITERIA
-        )
+        src = p.reshape(-1, 1, 2)
+        if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4.x: the iteration criteria's own function
+            out = cv2.undistortPointsIter(src, self.K, self.dist, None, None, _UNDISTORT_CRITERIA)
+        else:  # OpenCV 5: undistortPoints takes them
+            out = cv2.undistortPoints(src, self.K, self.dist, criteria=_UNDISTORT_CRITERIA)
         return out.reshape(-1, 2).astype(np.float64, copy=False)
 
     def undistort_points(self, points: ArrayLike) -> FloatArray:

@@ -32,7 +32,7 @@ from _results import fmt, write_results
 from visloc.control import ControlSpecs, LoopSpec, design_gains, vertex_check
 from visloc.model import ARDRONE2
 from visloc.pose.maps import GridMap
-from visloc.sim import SIM_GRID, BottomCamera, simulate, square_scenario, step_scenario
+from visloc.sim import SIM_GRID, BottomCamera, figure8_scenario, simulate, square_scenario, step_scenario
 from visloc.types import Pose
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -94,6 +94,10 @@ def scenarios(quick: bool) -> list[dict]:
     for seed in range(2 if quick else 8):
         rows.append(_row(f"square 1.25 m on vision, sigma=2 seed={seed}", simulate(square, sigma=2.0, seed=seed)))
         print(rows[-1], file=sys.stderr)
+    eight = figure8_scenario(1.2, speed=0.5, vision=True)
+    for seed in range(1 if quick else 2):
+        rows.append(_row(f"figure8 1.2 m on vision, sigma=2 seed={seed}", simulate(eight, sigma=2.0, seed=seed)))
+        print(rows[-1], file=sys.stderr)
     return rows
 
 
@@ -125,7 +129,7 @@ def markdown(result) -> str:
         "(`ControlSpecs()`), RK4 at 1 kHz, control and IMU at 200 Hz, bottom camera 320x240 at 30 Hz "
         "over a 10 x 10 DICT_4X4_100 grid (hover-vision, light turbulence). Settling: 5 % band "
         "(5 cm; 25 cm for the 5 m steps, counted from the trajectory's end); height dip: largest height "
-        "loss after the step or push; for the squares, pos RMS is the tracking error from the moving "
+        "loss after the step or push; for the squares and eights, pos RMS is the tracking error from the moving "
         "reference."), "",
         ("| run | status | settle s | overshoot % | height dip cm | pos RMS cm | est. RMS mm | fixes | "
         "linear: settle s / overshoot % / dip cm | x real time |"),

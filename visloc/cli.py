@@ -347,11 +347,11 @@ def _add_robust(sub: argparse._SubParsersAction) -> None:
 def _add_sim(sub: argparse._SubParsersAction) -> None:
     """The ``visloc sim`` sub-command's arguments."""
     sm = sub.add_parser("sim", help="closed-loop simulation: model, sensors, visloc's estimators, controller")
-    sm.add_argument("scenario", choices=("hover", "sidestep", "push", "hover-vision", "step", "square"),
+    sm.add_argument("scenario", choices=("hover", "sidestep", "push", "hover-vision", "step", "square", "figure8"),
                     help="hover 10 s; sidestep: 1 m in y (report Fig. 4.6); push: 4 N for 0.1 s "
                          "(Fig. 4.5); hover-vision: 30 s on the marker-grid vision pipeline; step: --distance "
                          "m in y along a minimum-jerk trajectory with feed-forward (--plain: a set-point step); square: "
-                         "--side m at up to --speed m/s (--vision: on the marker-grid vision)")
+                         "--side m at up to --speed m/s (--vision: on the marker-grid vision); figure8: --side m wide, as square")
     sm.add_argument("--distance", type=_at_most(100, "a side step in a room or a field"), default=5.0, metavar="M",
                     help="the step scenario's distance, m (default 5)")
     sm.add_argument("--plain", action="store_true", help="step: jump the set point as the report does, no trajectory")

@@ -79,3 +79,30 @@ def test_the_square_is_tracked_closely_on_spread_motors(capsys):
         square_scenario(0.0)
     assert main(["sim", "square", "--side", "0.5", "--json"]) == 0
     assert '"scenario": "square"' in capsys.readouterr().out
+
+
+def test_the_figure_eight_is_smooth_within_its_limits_and_tracked():
+    from visloc.control.trajectory import Figure8Trajectory
+    from visloc.sim import figure8_scenario
+
+    lim = TrajectoryLimits(speed=0.5, acceleration=1.0)
+    tr = Figure8Trajectory([0.0, 0.0, -1.0], 1.2, lim, start=1.0)
+    samples = [tr.sample(float(t)) for t in np.linspace(1.0, tr.end, 3001)]
+    pos = np.array([s[0] for s in samples])
+    assert np.ptp(pos[:, 0]) == pytest.approx(1.2, rel=1e-3) and np.ptp(pos[:, 1]) == pytest.approx(0.6, rel=1e-2)
+    speed = max(np.linalg.norm(s[1]) for s in samples)
+    accel = max(np.linalg.norm(s[2]) for s in samples)
+    assert speed <= 0.5 + 1e-3 and accel <= 1.0 + 1e-3 and max(speed / 0.5, accel) > 0.99
+    assert np.allclose(tr.sample(0.0)[0], tr.sample(99.0)[0]) and np.allclose(tr.sample(tr.end)[1], 0)
+    h = 1e-5
+    for t in (1.7, 3.1, tr.end - 0.4):
+        p0, v0, a0, _ = tr.sample(t - h)
+        p1, v1, a1, _ = tr.sample(t + h)
+        _, v, a, j = tr.sample(t)
+        assert np.allclose((p1 - p0) / (2 * h), v, atol=1e-6)
+        assert np.allclose((v1 - v0) / (2 * h), a, atol=1e-5)
+        assert np.allclose((a1 - a0) / (2 * h), j, atol=1e-4)
+    r = simulate(figure8_scenario(1.2), sigma=2.0, seed=2)
+    assert r.status is SimStatus.SETTLED and r.metrics["position_rms_m"] <= 0.03
+    with pytest.raises(ValueError, match="width"):
+        figure8_scenario(0.0)

@@ -39,13 +39,22 @@ def sim(args: argparse.Namespace) -> int:
     int
         Exit status: 0 settled or completed, 1 crashed or diverged, 130 interrupted.
     """
-    from visloc.sim import SimStatus, get_scenario, simulate, square_scenario, step_scenario
+    from visloc.sim import (
+        SimStatus,
+        figure8_scenario,
+        get_scenario,
+        simulate,
+        square_scenario,
+        step_scenario,
+    )
     from visloc.sim.output import save_plot, save_rerun, write_csv
 
     if args.scenario == "step":  # a side step of --distance m: smooth with feed-forward, or --plain
         scenario = step_scenario(args.distance, smooth=not args.plain)
     elif args.scenario == "square":
         scenario = square_scenario(args.side, speed=args.speed, vision=args.vision)
+    elif args.scenario == "figure8":
+        scenario = figure8_scenario(args.side, speed=args.speed, vision=args.vision)
     else:
         scenario = get_scenario(args.scenario)
     for option, suffix in (("out", ".csv"), ("plot", ".png"), ("rerun", ".rrd")):

@@ -20,7 +20,8 @@ from visloc.control._checks import check_params, check_real
 from visloc.model.params import ARDRONE2, ARDrone2Params
 from visloc.types import FloatArray
 
-__all__ = ["PEAK_ACCELERATION", "PEAK_SPEED", "MinJerkTrajectory", "TrajectoryLimits", "model_limits"]
+__all__ = ["PEAK_ACCELERATION", "PEAK_SPEED", "Figure8Trajectory", "MinJerkTrajectory", "TrajectoryLimits",
+           "model_limits"]
 
 PEAK_SPEED = 1.875
 """Peak of ``s'(u)``: a segment's peak speed is ``1.875 D / T``."""
@@ -161,3 +162,78 @@ class MinJerkTrajectory:
         dds = 60.0 * u * (1.0 - u) * (1.0 - 2.0 * u) / T**2
         ddds = 60.0 * (1.0 - 6.0 * u + 6.0 * u * u) / T**3
         return self.waypoints[k] + s * d, ds * d, dds * d, ddds * d
+
+
+class Figure8Trajectory:
+    """A figure eight (Gerono's lemniscate) in the horizontal plane, flown once from rest to
+    rest: ``p(t) = centre + (w/2 sin s, w/4 sin 2s, 0)`` with the phase ``s`` going from 0 to
+    ``2 pi`` along the minimum-jerk profile of :class:`MinJerkTrajectory` over the shortest
+    duration the limits allow (found by sampling the curve's speed and acceleration).
+
+    Parameters
+    ----------
+    centre : array_like (3,)
+        Where the two loops cross (start and end), m.
+    width : float
+        Extent along x, m (> 0); the eight is half as wide along y.
+    limits : TrajectoryLimits
+        Speed and acceleration limits.
+    start : float
+        Start time, s.
+
+    Attributes
+    ----------
+    duration, end : float
+        s.
+    """
+
+    def __init__(self, centre: ArrayLike, width: float, limits: TrajectoryLimits, *, start: float = 0.0) -> None:
+        c = np.asarray(centre, dtype=np.float64).reshape(-1)
+        if c.shape != (3,) or not np.isfinite(c).all():
+            raise ValueError(f"centre must be 3 finite numbers, got {np.asarray(centre).tolist()}")
+        if not isinstance(limits, TrajectoryLimits):
+            raise TypeError(f"limits: expected TrajectoryLimits, got {type(limits).__name__}")
+        self.centre, self.width, self.limits = c, check_real(width, "width", positive=True), limits
+        self.start = check_real(start, "start")
+        self.duration = 1.0
+        u = np.linspace(0.0, 1.0, 2001)
+        # speed and acceleration scale as 1/T and 1/T^2: one sampling at T = 1 fixes the shortest T
+        v1 = max(float(np.linalg.norm(self._at(float(x))[1])) for x in u)
+        a1 = max(float(np.linalg.norm(self._at(float(x))[2])) for x in u)
+        self.duration = max(v1 / limits.speed, math.sqrt(a1 / limits.acceleration))
+        self.end = self.start + self.duration
+
+    def _at(self, u: float) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Position and its first three time derivatives at the fraction ``u`` of the flight."""
+        T, two_pi = self.duration, 2.0 * math.pi
+        s = two_pi * u**3 * (10.0 - 15.0 * u + 6.0 * u * u)
+        ds = two_pi * 30.0 * u * u * (1.0 - u) ** 2 / T
+        dds = two_pi * 60.0 * u * (1.0 - u) * (1.0 - 2.0 * u) / T**2
+        ddds = two_pi * 60.0 * (1.0 - 6.0 * u + 6.0 * u * u) / T**3
+        a, b = 0.5 * self.width, 0.25 * self.width
+        # the curve's derivatives with respect to the phase s
+        c1 = np.array([a * math.cos(s), 2 * b * math.cos(2 * s), 0.0])
+        c2 = np.array([-a * math.sin(s), -4 * b * math.sin(2 * s), 0.0])
+        c3 = np.array([-a * math.cos(s), -8 * b * math.cos(2 * s), 0.0])
+        p = self.centre + np.array([a * math.sin(s), b * math.sin(2 * s), 0.0])
+        return (p, c1 * ds, c2 * ds * ds + c1 * dds, c3 * ds**3 + 3.0 * c2 * ds * dds + c1 * ddds)
+
+    def sample(self, t: float) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Position, velocity, acceleration and jerk (3,) each at time ``t`` (at rest at the
+        centre before the start and after the end).
+
+        Parameters
+        ----------
+        t : float
+            Time, s.
+
+        Returns
+        -------
+        tuple of 4 ndarrays (3,)
+            m, m/s, m/s^2, m/s^3.
+        """
+        u = min(1.0, max(0.0, (t - self.start) / self.duration))
+        if u in (0.0, 1.0):
+            zero = np.zeros(3)
+            return self.centre.copy(), zero, zero.copy(), zero.copy()
+        return self._at(u)

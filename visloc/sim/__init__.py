@@ -12,7 +12,14 @@ with :class:`visloc.control.Controller` and returns a :class:`SimResult` with a
 from visloc.sim.estimators import TruthEstimator, VisionEstimator
 from visloc.sim.loop import SIM_GRID, SimResult, SimStatus, simulate
 from visloc.sim.metrics import linear_step_response, settling_time
-from visloc.sim.scenarios import SCENARIOS, Scenario, get_scenario, square_scenario, step_scenario
+from visloc.sim.scenarios import (
+    SCENARIOS,
+    Scenario,
+    figure8_scenario,
+    get_scenario,
+    square_scenario,
+    step_scenario,
+)
 from visloc.sim.sensors import BODY_TO_CAMERA, MAP_FROM_NED, BottomCamera, Imu, Ultrasound
 from visloc.sim.vehicle import Vehicle, motor_coefficients
 
@@ -30,6 +37,7 @@ __all__ = [
     "Ultrasound",
     "Vehicle",
     "VisionEstimator",
+    "figure8_scenario",
     "get_scenario",
     "linear_step_response",
     "motor_coefficients",

@@ -6,10 +6,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from visloc.control.trajectory import MinJerkTrajectory, TrajectoryLimits, model_limits
+from visloc.control.trajectory import (
+    Figure8Trajectory,
+    MinJerkTrajectory,
+    TrajectoryLimits,
+    model_limits,
+)
 from visloc.types import FloatArray
 
-__all__ = ["SCENARIOS", "Scenario", "get_scenario", "square_scenario", "step_scenario"]
+__all__ = ["SCENARIOS", "Scenario", "figure8_scenario", "get_scenario", "square_scenario", "step_scenario"]
 
 HOVER_HEIGHT = 1.0
 """Height of every scenario's hover point above the floor, m (NED ``z = -1``)."""
@@ -50,7 +55,7 @@ class Scenario:
     estimator: str = "truth"
     gust_std: float = 0.0
     band: float = 0.05
-    trajectory: MinJerkTrajectory | None = None
+    trajectory: MinJerkTrajectory | Figure8Trajectory | None = None
 
     @property
     def start_setpoint(self) -> FloatArray:
@@ -165,6 +170,32 @@ def square_scenario(side: float = 1.25, *, speed: float = 0.5, vision: bool = Fa
     traj = MinJerkTrajectory(corners, limits or model_limits(speed=speed), start=start)
     return Scenario("square", f"a {s:g} m square at up to {speed:g} m/s along minimum-jerk segments"
                               + (" on visloc's vision" if vision else ""), traj.end + 2.0,
+                    estimator="vision" if vision else "truth", gust_std=0.05 if vision else 0.0, trajectory=traj)
+
+
+def figure8_scenario(width: float = 1.2, *, speed: float = 0.5, vision: bool = False, start: float = 1.0,
+                     limits: TrajectoryLimits | None = None) -> Scenario:
+    """Fly a figure eight ``width`` m wide (half as wide across) through the hover point, once,
+    at up to ``speed`` m/s (:class:`visloc.control.trajectory.Figure8Trajectory`).
+
+    Parameters
+    ----------
+    width : float
+        m (> 0; with ``vision`` up to about 1.3 m: the view stays over the printed grid).
+    speed, vision, start, limits
+        As :func:`square_scenario`.
+
+    Returns
+    -------
+    Scenario
+        Named ``figure8``; 2 s after the return; ``position_rms_m`` is the tracking RMS.
+    """
+    w = float(width)
+    if not (0.0 < w < 100.0):
+        raise ValueError(f"width must be in (0, 100) m, got {width!r}")
+    traj = Figure8Trajectory([0.0, 0.0, -HOVER_HEIGHT], w, limits or model_limits(speed=speed), start=start)
+    return Scenario("figure8", f"a {w:g} m figure eight at up to {speed:g} m/s"
+                               + (" on visloc's vision" if vision else ""), traj.end + 2.0,
                     estimator="vision" if vision else "truth", gust_std=0.05 if vision else 0.0, trajectory=traj)
 
 

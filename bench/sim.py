@@ -32,7 +32,14 @@ from _results import fmt, write_results
 from visloc.control import ControlSpecs, LoopSpec, design_gains, vertex_check
 from visloc.model import ARDRONE2
 from visloc.pose.maps import GridMap
-from visloc.sim import SIM_GRID, BottomCamera, figure8_scenario, simulate, square_scenario, step_scenario
+from visloc.sim import (
+    SIM_GRID,
+    BottomCamera,
+    figure8_scenario,
+    simulate,
+    square_scenario,
+    step_scenario,
+)
 from visloc.types import Pose
 
 ROOT = Path(__file__).resolve().parents[1]

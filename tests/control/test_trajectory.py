@@ -24,9 +24,13 @@ def test_segments_start_and_end_at_rest_within_the_limits():
     accel = max(np.linalg.norm(s[2]) for s in samples)
     assert speed <= 1.0 + 1e-6 and accel <= 2.0 + 1e-6
     assert max(speed, accel / 2.0) > 0.99  # as fast as the limits allow: one of them is reached
-    # velocity, acceleration and jerk are the derivatives of what comes before them
+    _check_derivatives(tr, (0.9, 2.0, 3.3, tr.times[1] + 0.7))
+
+
+def _check_derivatives(tr, times):
+    """Velocity, acceleration and jerk are the derivatives of what comes before them."""
     h = 1e-5
-    for t in (0.9, 2.0, 3.3, tr.times[1] + 0.7):
+    for t in times:
         p0, v0, a0, _ = tr.sample(t - h)
         p1, v1, a1, _ = tr.sample(t + h)
         _, v, a, j = tr.sample(t)
@@ -94,14 +98,7 @@ def test_the_figure_eight_is_smooth_within_its_limits_and_tracked():
     accel = max(np.linalg.norm(s[2]) for s in samples)
     assert speed <= 0.5 + 1e-3 and accel <= 1.0 + 1e-3 and max(speed / 0.5, accel) > 0.99
     assert np.allclose(tr.sample(0.0)[0], tr.sample(99.0)[0]) and np.allclose(tr.sample(tr.end)[1], 0)
-    h = 1e-5
-    for t in (1.7, 3.1, tr.end - 0.4):
-        p0, v0, a0, _ = tr.sample(t - h)
-        p1, v1, a1, _ = tr.sample(t + h)
-        _, v, a, j = tr.sample(t)
-        assert np.allclose((p1 - p0) / (2 * h), v, atol=1e-6)
-        assert np.allclose((v1 - v0) / (2 * h), a, atol=1e-5)
-        assert np.allclose((a1 - a0) / (2 * h), j, atol=1e-4)
+    _check_derivatives(tr, (1.7, 3.1, tr.end - 0.4))
     r = simulate(figure8_scenario(1.2), sigma=2.0, seed=2)
     assert r.status is SimStatus.SETTLED and r.metrics["position_rms_m"] <= 0.03
     with pytest.raises(ValueError, match="width"):

@@ -80,6 +80,13 @@ def model_limits(params: ARDrone2Params = ARDRONE2, *, max_tilt_deg: float = 15.
     return TrajectoryLimits(check_real(speed, "speed", positive=True), a)
 
 
+def _profile(u: float, T: float) -> tuple[float, float, float, float]:
+    """The minimum-jerk profile ``s(u) = 10 u^3 - 15 u^4 + 6 u^5`` and its first three time
+    derivatives at the fraction ``u`` of a move lasting ``T`` seconds."""
+    return (u**3 * (10.0 - 15.0 * u + 6.0 * u * u), 30.0 * u * u * (1.0 - u) ** 2 / T,
+            60.0 * u * (1.0 - u) * (1.0 - 2.0 * u) / T**2, 60.0 * (1.0 - 6.0 * u + 6.0 * u * u) / T**3)
+
+
 class MinJerkTrajectory:
     """Rest-to-rest minimum-jerk segments through waypoints, as fast as the limits allow.
 
@@ -155,12 +162,8 @@ class MinJerkTrajectory:
         T = self.durations[k]
         if T <= 0:
             return self.waypoints[k + 1].copy(), zero, zero.copy(), zero.copy()
-        u = (t - self.times[k]) / T
+        s, ds, dds, ddds = _profile((t - self.times[k]) / T, T)
         d = self.waypoints[k + 1] - self.waypoints[k]
-        s = u**3 * (10.0 - 15.0 * u + 6.0 * u * u)
-        ds = 30.0 * u * u * (1.0 - u) ** 2 / T
-        dds = 60.0 * u * (1.0 - u) * (1.0 - 2.0 * u) / T**2
-        ddds = 60.0 * (1.0 - 6.0 * u + 6.0 * u * u) / T**3
         return self.waypoints[k] + s * d, ds * d, dds * d, ddds * d
 
 
@@ -205,11 +208,7 @@ class Figure8Trajectory:
 
     def _at(self, u: float) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         """Position and its first three time derivatives at the fraction ``u`` of the flight."""
-        T, two_pi = self.duration, 2.0 * math.pi
-        s = two_pi * u**3 * (10.0 - 15.0 * u + 6.0 * u * u)
-        ds = two_pi * 30.0 * u * u * (1.0 - u) ** 2 / T
-        dds = two_pi * 60.0 * u * (1.0 - u) * (1.0 - 2.0 * u) / T**2
-        ddds = two_pi * 60.0 * (1.0 - 6.0 * u + 6.0 * u * u) / T**3
+        s, ds, dds, ddds = (2.0 * math.pi * v for v in _profile(u, self.duration))  # the phase, 0 .. 2 pi
         a, b = 0.5 * self.width, 0.25 * self.width
         # the curve's derivatives with respect to the phase s
         c1 = np.array([a * math.cos(s), 2 * b * math.cos(2 * s), 0.0])
@@ -219,19 +218,8 @@ class Figure8Trajectory:
         return (p, c1 * ds, c2 * ds * ds + c1 * dds, c3 * ds**3 + 3.0 * c2 * ds * dds + c1 * ddds)
 
     def sample(self, t: float) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-        """Position, velocity, acceleration and jerk (3,) each at time ``t`` (at rest at the
-        centre before the start and after the end).
-
-        Parameters
-        ----------
-        t : float
-            Time, s.
-
-        Returns
-        -------
-        tuple of 4 ndarrays (3,)
-            m, m/s, m/s^2, m/s^3.
-        """
+        """As :meth:`MinJerkTrajectory.sample` (at rest at the centre before the start and after
+        the end)."""
         u = min(1.0, max(0.0, (t - self.start) / self.duration))
         if u in (0.0, 1.0):
             zero = np.zeros(3)

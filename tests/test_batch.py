@@ -153,3 +153,22 @@ def test_frame_range_keeps_the_sources_indices_and_times(recordings, tmp_path):
     assert b"".join(parts) == serial["v2"] and parts[1].count(b"\n") == 3
     with pytest.raises(SystemExit):
         main(["detect", videos[1], "--frame-range", "4:2"])
+
+
+def test_a_job_file_runs_like_the_command_line(recordings, cluster, tmp_path, capsys):
+    root, videos, serial = recordings
+    job = root / "job.toml"  # relative paths are the job file's
+    job.write_text(f'command = "detect"\nrecordings = ["v*.mp4"]\noutdir = "{tmp_path / "job"}"\n'
+                   f'options = "--dict DICT_4X4_50"\nscheduler = "{cluster}"\nchunk = 4\n')
+    assert main(["batch", "--job", str(job), "--quiet"]) == 0
+    for stem, data in serial.items():
+        assert (tmp_path / "job" / f"{stem}.jsonl").read_bytes() == data
+    bad = tmp_path / "bad.toml"
+    bad.write_text('command = "detect"\nrecordings = "v1.mp4"\ncolour = 3\n')
+    assert main(["batch", "--job", str(bad)]) == 2
+    assert "unknown keys colour" in capsys.readouterr().err
+    bad.write_text('command = "detect"\nrecordings = "v1.mp4"\n')
+    assert main(["batch", "--job", str(bad)]) == 2
+    assert "recordings must be a list" in capsys.readouterr().err
+    assert main(["batch", "detect", videos[0]]) == 2  # no --outdir anywhere
+    assert "batch needs --outdir" in capsys.readouterr().err

@@ -306,13 +306,14 @@ def _add_track(sub: argparse._SubParsersAction) -> None:
 def _add_batch(sub: argparse._SubParsersAction) -> None:
     """The ``visloc batch`` sub-command's arguments."""
     b = sub.add_parser("batch", help="one command over many recordings on Dask (local cores or a cluster)")
-    b.add_argument("batch_command", metavar="COMMAND", choices=("detect", "localize", "flow", "track"),
-                   help="detect, localize, flow or track")
-    b.add_argument("recordings", nargs="+", metavar="RECORDING",
-                   help="videos, image folders, bags (glob patterns are expanded)")
-    b.add_argument("--outdir", required=True, metavar="DIR",
-                   help="one output per recording (NAME.jsonl or NAME.csv) and summary.csv")
-    b.add_argument("--options", default="", metavar="'OPTIONS'",
+    b.add_argument("batch_command", metavar="COMMAND", nargs="?", choices=("detect", "localize", "flow", "track"),
+                   help="detect, localize, flow or track (or in --job)")
+    b.add_argument("recordings", nargs="*", metavar="RECORDING",
+                   help="videos, image folders, bags (glob patterns are expanded; or in --job)")
+    b.add_argument("--job", metavar="JOB.toml", help="a job file: command, recordings, outdir, options, workers, "
+                                                     "scheduler, chunk, force (the command line's values win)")
+    b.add_argument("--outdir", metavar="DIR", help="one output per recording (NAME.jsonl or NAME.csv) and summary.csv")
+    b.add_argument("--options", default=None, metavar="'OPTIONS'",
                    help="the command's options as one quoted string, e.g. '--dict DICT_4X4_100 --fps 30'")
     b.add_argument("--workers", type=_count, metavar="N", help="local worker processes (default: one per core)")
     b.add_argument("--scheduler", metavar="ADDRESS", help="a running Dask scheduler, e.g. tcp://10.0.0.5:8786")
@@ -424,7 +425,7 @@ _COMMANDS = {"detect": ("markers", "detect"), "render": ("markers", "render"), "
              "batch": ("batch", "batch")}
 
 #: options naming files or folders a command reads, and those it writes
-_INPUTS = ("source", "camera", "map", "height_csv", "imu", "truth", "dict", "body", "reference", "board")
+_INPUTS = ("source", "camera", "map", "height_csv", "imu", "truth", "dict", "body", "reference", "board", "job")
 _OUTPUTS = ("out", "annotate", "rerun", "explain", "plot", "outdir", "output", "coverage")
 
 

@@ -18,6 +18,55 @@ def _expand(patterns: list[str]) -> list[str]:
     return out
 
 
+_JOB_KEYS = {"command": str, "recordings": list, "outdir": str, "options": str, "workers": int, "scheduler": str,
+             "chunk": int, "force": bool}
+
+
+def _job(args: argparse.Namespace) -> None:
+    """Fill ``args`` from ``--job JOB.toml`` where the command line left a value out; the job's
+    relative paths are relative to its own folder."""
+    import tomllib
+    from pathlib import Path
+
+    from visloc.errors import UsageError
+
+    if args.job:
+        path = Path(args.job)
+        try:
+            job = tomllib.loads(path.read_text())
+        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+            raise UsageError(f"--job {args.job}: {exc}") from None
+        unknown = sorted(set(job) - set(_JOB_KEYS))
+        if unknown:
+            raise UsageError(f"--job {args.job}: unknown keys {', '.join(unknown)} (known: {', '.join(_JOB_KEYS)})")
+        for key, kind in _JOB_KEYS.items():
+            if key in job and (not isinstance(job[key], kind) or (kind is int and isinstance(job[key], bool))):
+                raise UsageError(f"--job {args.job}: {key} must be a {kind.__name__}, got {job[key]!r}")
+        base = path.parent
+
+        def here(p: str) -> str:
+            return p if Path(p).is_absolute() or p.startswith("tcp:") else str(base / p)
+
+        if args.batch_command is None:
+            args.batch_command = job.get("command")
+        if not args.recordings and "recordings" in job:
+            args.recordings = [here(str(r)) for r in job["recordings"]]
+        if args.outdir is None and "outdir" in job:
+            args.outdir = here(job["outdir"])
+        for key in ("options", "workers", "scheduler", "chunk"):
+            if getattr(args, key) is None and key in job:
+                setattr(args, key, job[key])
+        args.force = args.force or bool(job.get("force", False))
+    missing = [name for name, v in (("COMMAND", args.batch_command), ("RECORDING", args.recordings),
+                                    ("--outdir", args.outdir)) if not v]
+    if missing:
+        raise UsageError(f"batch needs {', '.join(missing)} (on the command line or in --job)")
+    if args.batch_command not in ("detect", "localize", "flow", "track"):
+        raise UsageError(f"batch runs detect, localize, flow or track, not {args.batch_command!r}")
+    if args.options is None:
+        args.options = ""
+
+
 def batch(args: argparse.Namespace) -> int:
     """``visloc batch``: run ``args.batch_command`` over ``args.recordings`` into ``args.outdir``.
 
@@ -34,6 +83,7 @@ def batch(args: argparse.Namespace) -> int:
     """
     from visloc.batch import run_batch
 
+    _job(args)
     recordings = _expand(args.recordings)
     bar = tqdm(total=len(recordings), unit="recording", disable=True if args.quiet else None, file=sys.stderr)
 

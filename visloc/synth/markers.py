@@ -22,6 +22,7 @@ sRGB encoding, JPEG); the ground-truth corners are then the distorted projection
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -184,9 +185,17 @@ def _plane_polygons(bits: NDArray[np.uint8], length: float, margin_cells: float)
     """Polygons of one marker in its plane: the quiet-zone square, and the white parts.
 
     Returns ``(outer, polys, weights)``: ``outer`` (4, 2) plane corners of the printed area;
-    ``sum(weights[k] * [inside polys[k]])`` is 1 on white print, 0 on black and outside.
+    ``sum(weights[k] * [inside polys[k]])`` is 1 on white print, 0 on black and outside. The
+    same marker, length and margin give the same (read-only) arrays: a map's renders reuse them.
     """
-    s = bits.shape[0]
+    b = np.ascontiguousarray(bits, dtype=np.uint8)
+    return _polygons_of(b.tobytes(), b.shape[0], float(length), float(margin_cells))
+
+
+@functools.lru_cache(maxsize=4096)
+def _polygons_of(bits_bytes: bytes, s: int, length: float, margin_cells: float):
+    """:func:`_plane_polygons` of the marker whose ``s x s`` bits are ``bits_bytes``."""
+    bits = np.frombuffer(bits_bytes, np.uint8).reshape(s, s)
     cell = length / (s + 2)
     h = 0.5 * length
     ho = h + margin_cells * cell
@@ -205,7 +214,9 @@ def _plane_polygons(bits: NDArray[np.uint8], length: float, margin_cells: float)
         for a, b in zip(starts, stops, strict=True):
             polys.append(rect(-h + (1 + a) * cell, -h + (1 + b) * cell, y_top, y_bot))
             weights.append(1.0)
-    return outer, polys, weights
+    for p in polys:
+        p.setflags(write=False)
+    return outer, tuple(polys), tuple(weights)
 
 
 def _project_clipped(K: FloatArray, pose: Pose, poly: FloatArray, near: float) -> FloatArray:

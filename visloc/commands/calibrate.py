@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from visloc.boards import CharucoBoard, calibrate, detect_charuco
+from visloc.boards import CharucoBoard, MarkerBoard, calibrate, detect_charuco, detect_marker_board
 from visloc.commands._common import frames_of, warn
 from visloc.errors import UsageError
 from visloc.io import open_source
@@ -28,11 +28,21 @@ MIN_TILT_DEG = 20.0
 GRID, COVERAGE = 4, 0.75
 
 
-def _board(path: str) -> CharucoBoard:
+def _board(path: str) -> CharucoBoard | MarkerBoard:
+    """A ChArUco board file (``board_type: charuco``), or a marker map file as a board."""
     try:
-        return CharucoBoard.from_file(path)
-    except ValueError as exc:
+        if "board_type" in Path(path).read_text(errors="replace"):
+            return CharucoBoard.from_file(path)
+        return MarkerBoard.from_file(path)
+    except (ValueError, OSError) as exc:
         raise UsageError(str(exc)) from None
+
+
+def _find(image, board: CharucoBoard | MarkerBoard, response):
+    """The board's points in one image (ChArUco corners, or a marker map's marker corners)."""
+    if isinstance(board, MarkerBoard):
+        return detect_marker_board(image, board, response=response)
+    return detect_charuco(image, board, response=response)
 
 
 def calibrate_camera(args: argparse.Namespace) -> int:
@@ -66,7 +76,7 @@ def calibrate_camera(args: argparse.Namespace) -> int:
                 warn("calibrate", f"{frame.name} is {shape[0]}x{shape[1]}, the first frame {size[0]}x{size[1]}: "
                                   "left out")
                 continue
-            found = detect_charuco(frame.image, board, response=args.response)
+            found = _find(frame.image, board, args.response)
             if len(found) < args.min_corners:
                 warn("calibrate", f"{frame.name}: {len(found)} board corners, fewer than --min-corners "
                                   f"{args.min_corners}: left out")

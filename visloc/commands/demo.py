@@ -114,7 +114,7 @@ def _demo_localize() -> bool:
     from visloc.synth.grid import FLIGHT_CAMERA, render_map_flight
 
     grid = GridMap(**LOCALIZE_GRID)
-    flight = render_map_flight(1.0, 30.0, grid, seed=4, dictionary="DICT_4X4_100", background="gravel",
+    flight = render_map_flight(1.0, 15.0, grid, seed=4, dictionary="DICT_4X4_100", background="gravel",
                                camera=FLIGHT_CAMERA)
     camera = Camera(flight.K, size=(320, 240))
     detector = MarkerDetector("DICT_4X4_100")

@@ -15,8 +15,15 @@ Printed per method: chessboard corners found (of those visible) and their RMS an
 against the truth; calibrating from views 0-19 of each set (OpenCV's five-coefficient model for
 all): the errors of fx, fy, cx, cy (px) and the RMS reprojection error on views 20-29 (their
 true corners, each view's pose solved with the calibrated camera by ``solvePnP``); and the time
-to calibrate from all 30 views (detection plus solver). Usage: ``python bench/calibrate.py``;
-writes ``bench/results/calibrate.json`` and ``calibrate.md``.
+to calibrate from all 30 views (detection plus solver).
+
+A second table does the same for visloc's own marker grid as the board (a 5 x 9 ``GridMap`` of
+4 cm DICT_4X4_50 markers, ``marker_map_views``: the same camera and poses, seen from above):
+visloc's ``MarkerBoard`` corners against OpenCV's ``ArucoDetector`` corners (default and
+SUBPIX) matched to the same map points, each calibrated from all 30 views by the same
+``cv2.calibrateCamera``; errors of fx, fy, cx, cy and k1 against the truth.
+
+Usage: ``python bench/calibrate.py``; writes ``bench/results/calibrate.json`` and ``calibrate.md``.
 """
 
 from __future__ import annotations
@@ -31,8 +38,16 @@ import cv2
 import numpy as np
 from _results import fmt, write_results
 
-from visloc.boards import CharucoBoard, CharucoCorners, calibrate, detect_charuco
-from visloc.synth.calibration import calibration_views
+from visloc.boards import (
+    CharucoBoard,
+    CharucoCorners,
+    MarkerBoard,
+    calibrate,
+    detect_charuco,
+    detect_marker_board,
+)
+from visloc.pose.maps import GridMap
+from visloc.synth.calibration import CALIBRATION_CAMERA, calibration_views, marker_map_views
 
 ROOT = Path(__file__).resolve().parents[1]
 BOARD = CharucoBoard(9, 6, 0.03, 0.022, "DICT_5X5_100")
@@ -124,6 +139,67 @@ def run(seeds: list[int]) -> dict:
     return out
 
 
+GRID = GridMap(rows=5, cols=9, marker_length=0.04, spacing=0.01, dictionary="DICT_4X4_50")
+
+
+def _grid_methods() -> dict:
+    """The points of a marker grid in one image, per method: visloc's MarkerBoard detection, and
+    OpenCV's ArucoDetector (default, SUBPIX) corners matched to the same map points."""
+    board = MarkerBoard(GRID)
+
+    def opencv(subpix: bool):
+        dp = cv2.aruco.DetectorParameters()
+        if subpix:
+            dp.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+        det = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50), dp)
+
+        def run(img):
+            corners, ids, _ = det.detectMarkers(img)
+            rows = [] if ids is None else [(board.row(int(i)), c.reshape(4, 2)) for c, i in zip(corners, ids.ravel())]
+            rows = sorted((k, c) for k, c in rows if k is not None)
+            if not rows:
+                return CharucoCorners(np.zeros(0, np.int64), np.zeros((0, 2)))
+            return CharucoCorners(np.concatenate([4 * k + np.arange(4) for k, _ in rows]).astype(np.int64),
+                                  np.concatenate([c for _, c in rows]).astype(np.float64))
+        return run
+
+    return board, {"visloc": lambda img: detect_marker_board(img, board), "opencv": opencv(False),
+                   "opencv_subpix": opencv(True)}
+
+
+def run_grid(seeds: list[int]) -> dict:
+    """visloc's marker-grid board against OpenCV's marker corners on the same views: corners
+    against the truth, the focal length, principal point and k1 of a calibration from all views."""
+    board, run_ = _grid_methods()
+    stats = {m: {"found": 0, "visible": 0, "errors": [], "f_err": [], "c_err": [], "k1_err": [], "seconds": []}
+             for m in run_}
+    for seed in seeds:
+        print(f"calibrate: marker-grid set {seed} ...", file=sys.stderr, flush=True)
+        views = marker_map_views(GRID, "DICT_4X4_50", N_VIEWS, size=SIZE, seed=100 + seed)
+        K_true = views[0].render.K
+        for m, fn in run_.items():
+            t0 = time.perf_counter()
+            found = [fn(v.render.image) for v in views]
+            s = stats[m]
+            for v, f in zip(views, found, strict=True):
+                truth = np.concatenate([t.corners for t in sorted(v.render.markers, key=lambda t: board.row(t.id))])
+                seen = np.concatenate([np.full(4, t.visible) for t in sorted(v.render.markers,
+                                                                              key=lambda t: board.row(t.id))])
+                s["visible"] += int(seen.sum())
+                s["found"] += len(f)
+                s["errors"].extend(np.linalg.norm(f.corners - truth[f.ids], axis=1).tolist())
+            cal = calibrate(found, board, SIZE)
+            s["seconds"].append(time.perf_counter() - t0)
+            s["f_err"].extend([abs(cal.K[0, 0] - K_true[0, 0]), abs(cal.K[1, 1] - K_true[1, 1])])
+            s["c_err"].extend([abs(cal.K[0, 2] - K_true[0, 2]), abs(cal.K[1, 2] - K_true[1, 2])])
+            s["k1_err"].append(abs(cal.dist[0] - CALIBRATION_CAMERA.k1))
+    return {m: {"found": s["found"], "visible": s["visible"],
+                "corner_rms_px": float(np.sqrt(np.mean(np.square(s["errors"])))),
+                "corner_median_px": float(np.median(s["errors"])), "f_err_px_mean": float(np.mean(s["f_err"])),
+                "c_err_px_mean": float(np.mean(s["c_err"])), "k1_err_mean": float(np.mean(s["k1_err"])),
+                "seconds_30_views_median": float(np.median(s["seconds"]))} for m, s in stats.items()}
+
+
 def markdown(result: dict) -> str:
     res = result["methods"]
     lines = [(f"\n**ChArUco calibration**, {SIZE[0]}x{SIZE[1]} camera-like views of a 9 x 6 board, "
@@ -136,6 +212,17 @@ def markdown(result: dict) -> str:
         lines.append(f"| {m} | {s['found']}/{s['visible']} | {fmt(s['corner_rms_px'])} | {fmt(s['corner_median_px'])} | "
                      f"{fmt(s['f_err_px_mean'], 2)} | {fmt(s['c_err_px_mean'], 2)} | {fmt(s['holdout_rms_px'], 4)} | "
                      f"{fmt(s['seconds_30_views_median'], 2)} |")
+    if "grid" in result:
+        lines += [(f"\n**Marker-grid board** (visloc's `GridMap` printed, 5 x 9 DICT_4X4_50 markers of 4 cm; the "
+                   f"same camera-like {SIZE[0]}x{SIZE[1]} views, {len(result['seeds'])} sets of {N_VIEWS}; each "
+                   "method's marker corners into the same `cv2.calibrateCamera`; errors against the truth)\n"),
+                  ("| method | corners found / of markers 2 px inside the image | corner RMS px | corner median px | "
+                   "fx, fy error px (mean) | cx, cy error px (mean) | k1 error (mean) | s to detect + calibrate 30 views |"),
+                  "|---|---|---|---|---|---|---|---|"]
+        for m, s in result["grid"].items():
+            lines.append(f"| {m} | {s['found']}/{s['visible']} | {fmt(s['corner_rms_px'])} | "
+                         f"{fmt(s['corner_median_px'])} | {fmt(s['f_err_px_mean'], 2)} | {fmt(s['c_err_px_mean'], 2)} | "
+                         f"{fmt(s['k1_err_mean'], 4)} | {fmt(s['seconds_30_views_median'], 2)} |")
     return "\n".join(lines) + "\n"
 
 
@@ -147,7 +234,7 @@ def main(argv=None) -> int:
     seeds = list(range(args.sets))
     result = {"machine": {"python": sys.version.split()[0], "opencv": cv2.__version__, "numpy": np.__version__,
                           "platform": platform.platform(), "cores": len(__import__("os").sched_getaffinity(0))},
-              "seeds": seeds, "methods": run(seeds)}
+              "seeds": seeds, "methods": run(seeds), "grid": run_grid(seeds)}
     write_results(args.out, "calibrate", result, markdown(result))
     return 0
 

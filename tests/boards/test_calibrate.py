@@ -79,36 +79,19 @@ def test_bad_inputs_are_one_line_errors(views, tmp_path, capsys):
 
 def test_a_printed_marker_grid_calibrates_the_camera(tmp_path):
     """visloc's own GridMap as the board (MarkerBoard): camera-like 800x600 views with lens
-    distortion, through visloc calibrate with the map file as --board."""
-    from scipy.spatial.transform import Rotation
-
-    from visloc.boards import MarkerBoard
+    distortion (marker_map_views), through visloc calibrate with the map file as --board."""
     from visloc.pose.maps import GridMap
-    from visloc.synth import default_camera
-    from visloc.synth.calibration import CALIBRATION_CAMERA
-    from visloc.synth.grid import render_map_view
-    from visloc.types import Pose
+    from visloc.synth.calibration import CALIBRATION_CAMERA, marker_map_views
 
     grid = GridMap(rows=5, cols=7, marker_length=0.04, spacing=0.01, dictionary="DICT_4X4_50")
     grid.to_file(tmp_path / "grid.yml")
-    pts = MarkerBoard(grid).chessboard_corners
-    centre, width = 0.5 * (pts.min(axis=0) + pts.max(axis=0)), np.ptp(pts[:, 0])
-    w, h = 800, 600
-    K = default_camera((w, h), hfov_deg=70.0)
-    rng = np.random.default_rng(1)
     (tmp_path / "views").mkdir()
-    for k in range(12):  # tilted up to 45 deg, turned up to 30, the camera looking down at the map
-        axis = rng.normal(size=2)
-        R = (Rotation.from_rotvec(np.r_[axis / np.linalg.norm(axis), 0] * np.radians(rng.uniform(0, 45)))
-             * Rotation.from_rotvec([0, 0, np.radians(rng.uniform(-30, 30))])
-             * Rotation.from_euler("x", 180, degrees=True)).as_matrix()
-        depth = K[0, 0] * width / (rng.uniform(0.45, 0.85) * w)
-        t = np.linalg.solve(K, [rng.uniform(0.2 * w, 0.8 * w), rng.uniform(0.2 * h, 0.8 * h), 1.0]) * depth - R @ centre
-        view = render_map_view(grid, K, (w, h), Pose(R, t), "DICT_4X4_50", camera=CALIBRATION_CAMERA, rng=rng)
+    views = marker_map_views(grid, "DICT_4X4_50", 12, size=(800, 600), seed=1)
+    for k, view in enumerate(views):
         cv2.imwrite(str(tmp_path / "views" / f"v{k:02d}.png"), view.render.image)
     cam = tmp_path / "cam.yml"
     assert main(["calibrate", str(tmp_path / "views"), "--board", str(tmp_path / "grid.yml"), "--out", str(cam),
                  "--quiet"]) == 0
-    got = Camera.from_file(cam)
+    got, K = Camera.from_file(cam), views[0].render.K
     assert np.abs(got.K[[0, 1, 0, 1], [0, 1, 2, 2]] - K[[0, 1, 0, 1], [0, 1, 2, 2]]).max() < 1.0  # px
     assert got.dist[0] == pytest.approx(CALIBRATION_CAMERA.k1, abs=0.01)

@@ -11,13 +11,15 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from visloc.boards.charuco import CharucoBoard
+from visloc.pose.maps import MarkerMap
 from visloc.synth.camera import CameraEffects
 from visloc.synth.charuco import CharucoRender, render_charuco
 from visloc.synth.datasets import write_camera_yml
+from visloc.synth.grid import MapView, render_map_view
 from visloc.synth.scenes import default_camera
 from visloc.types import Pose
 
-__all__ = ["CALIBRATION_CAMERA", "calibration_views", "render_calibration_views"]
+__all__ = ["CALIBRATION_CAMERA", "calibration_views", "marker_map_views", "render_calibration_views"]
 
 #: The camera of the calibration views: optics blur, shot and read noise, vignetting, radial
 #: distortion k1 = -0.12, k2 = 0.03, the sRGB curve, JPEG at quality 92
@@ -66,19 +68,72 @@ def calibration_views(board: CharucoBoard, n: int, *, size: tuple[int, int] = (1
     for _ in range(100 * n):
         if len(out) == n:
             break
-        axis = rng.normal(size=2)
-        tilt = Rotation.from_rotvec(np.r_[axis / np.linalg.norm(axis), 0.0] * np.radians(rng.uniform(0, 45)))
-        spin = Rotation.from_rotvec([0.0, 0.0, np.radians(rng.uniform(-30, 30))])
-        R = (tilt * spin).as_matrix()
-        depth = K[0, 0] * width / (rng.uniform(0.45, 0.85) * w)
-        u, v = rng.uniform(0.15 * w, 0.85 * w), rng.uniform(0.15 * h, 0.85 * h)
-        ray = np.linalg.solve(K, [u, v, 1.0])
-        t = ray * depth - R @ centre
-        view = render_charuco(K, (w, h), Pose(R, t), board, camera=camera, rng=rng)
+        view = render_charuco(K, (w, h), _board_pose(rng, K, (w, h), centre, width), board, camera=camera, rng=rng)
         if view.visible.sum() >= 0.5 * len(view.visible):
             out.append(view)
     if len(out) < n:
         raise ValueError(f"could not place {n} views of the board in a {w}x{h} image")
+    return out
+
+
+def _board_pose(rng: np.random.Generator, K: np.ndarray, size: tuple[int, int], centre: np.ndarray, width: float,
+                facing: Rotation | None = None) -> Pose:
+    """A random calibration pose (:func:`calibration_views`): the board's ``centre`` at a point
+    of the image's central 70 %, spanning 45-85 % of its width, tilted up to 45 degrees and
+    turned up to 30; ``facing`` turns the board's own axes first (a map with z up is seen
+    from above with a half turn about x)."""
+    w, h = size
+    axis = rng.normal(size=2)
+    tilt = Rotation.from_rotvec(np.r_[axis / np.linalg.norm(axis), 0.0] * np.radians(rng.uniform(0, 45)))
+    spin = Rotation.from_rotvec([0.0, 0.0, np.radians(rng.uniform(-30, 30))])
+    R = (tilt * spin * facing).as_matrix() if facing is not None else (tilt * spin).as_matrix()
+    depth = K[0, 0] * width / (rng.uniform(0.45, 0.85) * w)
+    ray = np.linalg.solve(K, [rng.uniform(0.15 * w, 0.85 * w), rng.uniform(0.15 * h, 0.85 * h), 1.0])
+    return Pose(R, ray * depth - R @ centre)
+
+
+def marker_map_views(marker_map: MarkerMap, dictionary: str, n: int, *, size: tuple[int, int] = (1280, 720),
+                     seed: int = 0, camera: CameraEffects = CALIBRATION_CAMERA, hfov_deg: float = 70.0,
+                     min_markers: float = 0.5) -> list[MapView]:
+    """``n`` camera-like views of a planar marker map (a printed ``GridMap``) at the poses of
+    :func:`calibration_views`, seen from above: calibration data for :class:`visloc.boards.
+    MarkerBoard`.
+
+    Parameters
+    ----------
+    marker_map : MarkerMap
+        Markers in the map's ``z = 0`` plane (z up).
+    dictionary : str
+        Their dictionary.
+    n, size, seed, camera, hfov_deg
+        As :func:`calibration_views`.
+    min_markers : float
+        Views where fewer than this share of the markers is visible are drawn again.
+
+    Returns
+    -------
+    list of MapView
+        Each with its image and per-marker truth (``view.render``) and the pose; the true
+        ``K`` is ``view.render.K``.
+    """
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 1 <= n <= 500:
+        raise ValueError(f"n must be an integer in [1, 500], got {n!r}")
+    w, h = size
+    K = default_camera((w, h), hfov_deg=hfov_deg)
+    rng = np.random.default_rng(seed)
+    pts = np.concatenate([marker_map.corners_of(int(i)) for i in marker_map.ids])
+    centre, width = 0.5 * (pts.min(axis=0) + pts.max(axis=0)), float(np.ptp(pts[:, 0]))
+    from_above = Rotation.from_euler("x", 180.0, degrees=True)
+    out: list[MapView] = []
+    for _ in range(100 * n):
+        if len(out) == n:
+            break
+        view = render_map_view(marker_map, K, (w, h), _board_pose(rng, K, (w, h), centre, width, from_above),
+                               dictionary, camera=camera, rng=rng)
+        if sum(m.visible for m in view.render.markers) >= min_markers * len(marker_map.ids):
+            out.append(view)
+    if len(out) < n:
+        raise ValueError(f"could not place {n} views of the map in a {w}x{h} image")
     return out
 
 

@@ -8,25 +8,16 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from tests.pose.test_relative import BODY, REFERENCE, SIZE, two_map_scene
+from tests.pose.test_relative import BODY, REFERENCE, SIZE, write_track_inputs
 from visloc.cli import main
 from visloc.markers import MarkerDetector
 from visloc.pose.maps import MarkerMap
 from visloc.synth import default_camera, write_camera_yml
-from visloc.types import Pose
 
 
 def test_track_writes_poses_and_sends_udp(tmp_path):
+    truth = write_track_inputs(tmp_path, 2.0, 4)  # the body moves 2 cm along x per frame, turning slowly
     frames = tmp_path / "frames"
-    frames.mkdir()
-    truth = []
-    for k in range(4):  # the body moves 2 cm along x per frame, turning slowly
-        T = Pose(Rotation.from_euler("z", 10 + 2 * k, degrees=True).as_matrix(), np.array([0.5 + 0.02 * k, -0.3, 0.6]))
-        cv2.imwrite(str(frames / f"f{k}.png"), two_map_scene(T, seed=k).image)
-        truth.append(T)
-    BODY.to_file(tmp_path / "body.yml")
-    REFERENCE.to_file(tmp_path / "ref.yml")
-    write_camera_yml(tmp_path / "cam.yml", default_camera(SIZE), SIZE)
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rx.bind(("127.0.0.1", 0))
     rx.settimeout(2.0)

@@ -67,6 +67,13 @@ def test_quaternions_are_scipys_in_mavlinks_order():
         assert np.allclose(_quaternion(R), want, atol=1e-12)
 
 
+def test_the_down_camera_is_the_simulators_mounting():
+    from visloc.io.mavlink import DOWN_CAMERA
+    from visloc.sim import BODY_TO_CAMERA
+
+    assert np.array_equal(DOWN_CAMERA, BODY_TO_CAMERA.T)  # one convention: io states it, sim flies it
+
+
 def test_map_frames_turn_into_ned():
     p = np.array([1.0, 2.0, 3.0])  # 1 m along x, 2 along y, 3 up
     assert MAP_FRAMES["nwu"] @ p == pytest.approx([1.0, -2.0, -3.0])
@@ -124,23 +131,10 @@ def test_missing_pymavlink_is_one_clear_line(tmp_path, monkeypatch, capsys):
 
 
 def test_track_sends_the_bodys_pose_in_ned(tmp_path):
-    import cv2
-    from scipy.spatial.transform import Rotation
+    from tests.pose.test_relative import write_track_inputs
 
-    from tests.pose.test_relative import BODY, REFERENCE, SIZE, two_map_scene
-    from visloc.synth import default_camera, write_camera_yml
-    from visloc.types import Pose
-
+    truth = write_track_inputs(tmp_path, 5.0, 3)
     frames = tmp_path / "frames"
-    frames.mkdir()
-    truth = []
-    for k in range(3):
-        T = Pose(Rotation.from_euler("z", 10 + 5 * k, degrees=True).as_matrix(), np.array([0.5 + 0.02 * k, -0.3, 0.6]))
-        cv2.imwrite(str(frames / f"f{k}.png"), two_map_scene(T, seed=k).image)
-        truth.append(T)
-    BODY.to_file(tmp_path / "body.yml")
-    REFERENCE.to_file(tmp_path / "ref.yml")
-    write_camera_yml(tmp_path / "cam.yml", default_camera(SIZE), SIZE)
     port = _free_port()
     rx = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", dialect="common")
     out = tmp_path / "track.jsonl"

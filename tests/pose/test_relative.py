@@ -29,6 +29,27 @@ def two_map_scene(T_ref_body: Pose, seed: int = 0):
                           noise_sigma=1.0)
 
 
+def write_track_inputs(root, yaw_step_deg: float, n: int) -> list[Pose]:
+    """``root/frames/f<k>.png`` of a body moving 2 cm along x per frame and turning
+    ``yaw_step_deg`` per frame from 10 deg, with ``body.yml``, ``ref.yml`` and ``cam.yml``
+    (for ``visloc track``); returns the true poses."""
+    import cv2
+
+    from visloc.synth import write_camera_yml
+
+    frames = root / "frames"
+    frames.mkdir()
+    truth = []
+    for k in range(n):
+        T = Pose(Rotation.from_euler("z", 10 + yaw_step_deg * k, degrees=True).as_matrix(),
+                 np.array([0.5 + 0.02 * k, -0.3, 0.6]))
+        cv2.imwrite(str(frames / f"f{k}.png"), two_map_scene(T, seed=k).image)
+        truth.append(T)
+    BODY.to_file(root / "body.yml")
+    REFERENCE.to_file(root / "ref.yml")
+    write_camera_yml(root / "cam.yml", default_camera(SIZE), SIZE)
+    return truth
+
 @pytest.mark.parametrize("yaw_deg, xyz", [(0.0, (0.6, -0.2, 0.5)), (35.0, (0.9, -0.5, 0.8)), (-120.0, (0.3, -0.6, 0.4))])
 def test_body_pose_in_the_reference_frame(yaw_deg, xyz):
     T_ref_body = Pose(Rotation.from_euler("zyx", [yaw_deg, 3.0, -2.0], degrees=True).as_matrix(), np.array(xyz))

@@ -180,3 +180,10 @@ def imu_input(args: argparse.Namespace, columns: tuple[str, ...], command: str) 
     if len(imu) == 0:
         raise UsageError(f"--imu-topic {args.imu_topic}: no IMU messages")
     return imu[:, [IMU_COLUMNS.index(c) for c in columns]]
+
+
+def mean_between(rows: np.ndarray, t0: float, t1: float) -> np.ndarray | None:
+    """The mean of the columns after the first (a time) over the rows with ``t0 < t <= t1`` (the
+    IMU samples of one frame interval), or None when there is none."""
+    sel = (rows[:, 0] > t0) & (rows[:, 0] <= t1)
+    return rows[sel, 1:].mean(axis=0) if sel.any() else None

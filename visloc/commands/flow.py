@@ -10,7 +10,14 @@ from contextlib import ExitStack
 import numpy as np
 from tqdm import tqdm
 
-from visloc.commands._common import camera_for, frames_of, imu_input, open_timed_source, warn
+from visloc.commands._common import (
+    camera_for,
+    frames_of,
+    imu_input,
+    mean_between,
+    open_timed_source,
+    warn,
+)
 from visloc.errors import UsageError
 from visloc.io import RerunLogger
 from visloc.pose import Camera
@@ -39,12 +46,6 @@ def render_flow(args: argparse.Namespace) -> int:
     what = "flight.mp4" if args.video else f"{len(flight.frames)} frames"
     print(f"visloc render: wrote {what}, ground_truth.csv, heights.csv and camera.yml to {out}")
     return 0
-
-def _mean_rates(log: np.ndarray, t0: float, t1: float) -> np.ndarray | None:
-    """The mean of the gyro samples (t, gx, gy, gz) in ``(t0, t1]``, or None when there is none."""
-    sel = (log[:, 0] > t0) & (log[:, 0] <= t1)
-    return log[sel, 1:].mean(axis=0) if sel.any() else None
-
 
 def _read_heights(path: str) -> dict[int, float]:
     """frame -> height (m) from a CSV with a header naming ``frame`` and ``height``."""
@@ -145,7 +146,7 @@ def flow(args: argparse.Namespace) -> int:
             dt = frame.time - last_time
             if not dt > 0:
                 raise UsageError(f"frame times must increase; {frame.name} is at {frame.time} s after {last_time} s")
-            gyro = _mean_rates(gyro_log, last_time, frame.time) if gyro_log is not None else None
+            gyro = mean_between(gyro_log, last_time, frame.time) if gyro_log is not None else None
             t0 = time.perf_counter()
             gv = ego.update(frame.image, dt=dt, height=height, gyro=gyro)
             times.append(time.perf_counter() - t0)

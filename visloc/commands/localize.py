@@ -16,6 +16,7 @@ from visloc.commands._common import (
     finite_rows,
     frames_of,
     imu_input,
+    mean_between,
     open_timed_source,
     warn,
 )
@@ -121,10 +122,8 @@ def localize(args: argparse.Namespace) -> int:
             force = None
             if imu is not None and R_map_cam is not None and last_t is not None:
                 # mean specific force over the interval (camera axes), turned into the map frame
-                sel = (imu[:, 0] > last_t) & (imu[:, 0] <= frame.time)
-                if sel.any():
-                    force = imu[sel, 1:].mean(axis=0)
-                    imu_used += 1
+                force = mean_between(imu, last_t, frame.time)
+                imu_used += force is not None
             fusion.predict(frame.time, force, R_map_cam if force is not None else None)
             last_t = frame.time
             frame_times.append(frame.time)

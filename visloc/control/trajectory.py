@@ -198,17 +198,16 @@ class Figure8Trajectory:
             raise TypeError(f"limits: expected TrajectoryLimits, got {type(limits).__name__}")
         self.centre, self.width, self.limits = c, check_real(width, "width", positive=True), limits
         self.start = check_real(start, "start")
-        self.duration = 1.0
-        u = np.linspace(0.0, 1.0, 2001)
         # speed and acceleration scale as 1/T and 1/T^2: one sampling at T = 1 fixes the shortest T
-        v1 = max(float(np.linalg.norm(self._at(float(x))[1])) for x in u)
-        a1 = max(float(np.linalg.norm(self._at(float(x))[2])) for x in u)
+        at_1s = [self._at(float(u), 1.0) for u in np.linspace(0.0, 1.0, 2001)]
+        v1 = max(float(np.linalg.norm(s[1])) for s in at_1s)
+        a1 = max(float(np.linalg.norm(s[2])) for s in at_1s)
         self.duration = max(v1 / limits.speed, math.sqrt(a1 / limits.acceleration))
         self.end = self.start + self.duration
 
-    def _at(self, u: float) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-        """Position and its first three time derivatives at the fraction ``u`` of the flight."""
-        s, ds, dds, ddds = (2.0 * math.pi * v for v in _profile(u, self.duration))  # the phase, 0 .. 2 pi
+    def _at(self, u: float, T: float) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Position and its first three time derivatives at the fraction ``u`` of a flight of ``T`` s."""
+        s, ds, dds, ddds = (2.0 * math.pi * v for v in _profile(u, T))  # the phase, 0 .. 2 pi
         a, b = 0.5 * self.width, 0.25 * self.width
         # the curve's derivatives with respect to the phase s
         c1 = np.array([a * math.cos(s), 2 * b * math.cos(2 * s), 0.0])
@@ -224,4 +223,4 @@ class Figure8Trajectory:
         if u in (0.0, 1.0):
             zero = np.zeros(3)
             return self.centre.copy(), zero, zero.copy(), zero.copy()
-        return self._at(u)
+        return self._at(u, self.duration)

@@ -180,7 +180,7 @@ class BagSource(FrameSource):
         self._reader = _open(path)
         try:
             self.topic, self._conns = _pick(self._reader, path, topic, IMAGE_TYPES, "image", "--topic")
-            self.origin_ns = first_stamp(self._reader, self._conns)
+            self.origin_ns = _first_stamp(self._reader, self._conns)
         except Exception:
             self._reader.close()
             raise
@@ -210,7 +210,7 @@ class BagSource(FrameSource):
         super().close()
 
 
-def first_stamp(reader, conns) -> int:
+def _first_stamp(reader, conns) -> int:
     """The stamp (ns) of the first message of ``conns`` (0 when there is none)."""
     for conn, log_ns, raw in reader.messages(connections=conns):
         try:
@@ -242,7 +242,7 @@ def read_bag_imu(path: str | os.PathLike[str], *, topic: str | None = None,
     reader = _open(path)
     try:
         _, img_conns = _pick(reader, path, image_topic, IMAGE_TYPES, "image", "--topic")
-        origin = first_stamp(reader, img_conns)
+        origin = _first_stamp(reader, img_conns)
         _, conns = _pick(reader, path, topic, (IMU_TYPE,), "IMU", "--imu-topic")
         rows = []
         for conn, log_ns, raw in reader.messages(connections=conns):

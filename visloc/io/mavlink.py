@@ -33,7 +33,6 @@ from __future__ import annotations
 import math
 import queue
 import threading
-import time
 from collections.abc import Sequence
 from typing import Self
 
@@ -385,14 +384,3 @@ def _usec(time_s: float) -> int:
     if not math.isfinite(time_s) or time_s < 0:
         raise ValueError(f"time_s must be a finite time >= 0, got {time_s!r}")
     return round(time_s * 1e6)
-
-
-def latency_probe(sink: MavlinkSink, n: int = 200) -> float:
-    """Median seconds to pack and send one ``VISION_POSITION_ESTIMATE`` on ``sink``
-    (for ``bench/``)."""
-    spent = []
-    for k in range(n):
-        t0 = time.perf_counter()
-        sink.send_vision_position(k / 30.0, (1.0, 2.0, -1.5), (0.01, -0.02, 1.0), covariance=np.eye(6) * 1e-4)
-        spent.append(time.perf_counter() - t0)
-    return float(np.median(spent))

@@ -82,3 +82,20 @@ def test_apriltag_photos_find_at_least_the_tags_opencv_finds(entry):
         if near:
             err = np.abs(q - near[0]).max()  # same corner order (the manifest converted it)
             assert err < 3.0
+
+
+def test_a_small_tag_merged_with_the_dark_around_it_is_found_by_the_search_around_its_neighbours():
+    # 34085...: a sheet of 13-20 px tags; the one at (462, 278) has a margin of a pixel or
+    # two, and its border merges with the dark behind it in the first pass; stage 3c's eroded
+    # search around the small markers found separates it
+    entry = next(im for im in APRIL if im["file"].startswith("34085"))
+    img = cv2.imread(str(REAL / entry["file"]), cv2.IMREAD_GRAYSCALE)
+    ref = next(np.array(r["corners"]) for r in entry["reference_detections"]
+               if np.abs(np.array(r["corners"]).mean(axis=0) - (462, 278)).max() < 4)
+
+    def near(dets):
+        return [d for d in dets if np.abs(d.corners.mean(axis=0) - ref.mean(axis=0)).max() < 4]
+
+    assert not near(MarkerDetector("DICT_APRILTAG_36h11", small_side=0).detect(img))
+    found = near(MarkerDetector("DICT_APRILTAG_36h11").detect(img))
+    assert len(found) == 1 and np.abs(found[0].corners - ref).max() < 1.0

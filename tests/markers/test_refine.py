@@ -46,6 +46,38 @@ def test_refine_recovers_subpixel_corners(blur, native, rng):
 
 
 @pytest.mark.parametrize("native", ENGINES)
+def test_more_passes_follow_blur_wider_than_the_profiles(native):
+    # blur (sigma 2 px) spreads each edge beyond the 7 px profiles: a pass moves a side only
+    # part of the way, two passes from 1.5 px off stop short; passing on until the corners
+    # settle (max_iterations) reaches the edges
+    rng = np.random.default_rng(3)
+    two, more = [], []
+    for _ in range(6):
+        c = rng.uniform(45, 55, 2)
+        a = rng.uniform(0, np.pi / 2)
+        rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+        truth = c + np.array([[-1, -1], [1, -1], [1, 1], [-1, 1.0]]) * rng.uniform(15, 25) @ rot.T
+        img = render_square((100, 100), truth, blur=2.0)
+        start = truth + rng.uniform(-1.5, 1.5, (4, 2))
+        for max_iterations, errs in ((None, two), (8, more)):
+            out, ok = refine_quads(img, start[None], radius=3, max_iterations=max_iterations, response="linear",
+                                   native=native)
+            assert ok[0]
+            errs.append(np.abs(out[0] - truth).max())
+    assert max(two) > 0.2, two
+    assert max(more) < 0.15, more
+
+
+def test_refine_rejects_bad_iteration_limits():
+    img = render_square((60, 60), [[20, 20], [40, 20], [40, 40], [20, 40]])
+    quad = np.array([[20, 20], [40, 20], [40, 40], [20, 40.0]])
+    with pytest.raises(ValueError, match="max_iterations"):
+        refine_quads(img, quad, max_iterations=101)
+    with pytest.raises(ValueError, match="tolerance"):
+        refine_quads(img, quad, max_iterations=4, tolerance=-1.0)
+
+
+@pytest.mark.parametrize("native", ENGINES)
 @pytest.mark.parametrize("blur", [0.8, 1.5])
 def test_refine_measures_edges_in_linear_light_on_srgb_images(blur, native, rng):
     # a camera blurs light, then encodes it with the sRGB curve: read through the sRGB

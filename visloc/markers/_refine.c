@@ -7,14 +7,18 @@
  * side_levels), the edge on each profile from the area of
  * the normalised step (e = r + 1/2 - sum v), profiles without a clean step dropped, weighted
  * total-least-squares lines (outliers of the last pass's first fit dropped), corners at their
- * intersections; `iterations` passes, each centred on the previous pass's lines. See
+ * intersections; `iterations` passes, each centred on the previous pass's lines, then more
+ * (up to `max_iterations`) while each pass shrank the largest corner move by SHRINK, until no
+ * corner moves more than `tol` px (a pass that did not shrink it is not taken; outliers dropped
+ * on each of those passes). See
  * refine.py for the reasoning. Grey levels are read through the camera's response (`lut`: the
  * linear intensity of each grey level, visloc.markers.response) before they are interpolated.
  * One difference: samples are interpolated bilinearly in double precision here, where the
  * numpy version reads them through cv2.remap (coordinates rounded to 1/32 px); the corners of
  * the two agree to about 0.01 px.
  *
- * refine_quads(gray, height, width, quads, radii, iterations, count, end_gap, lut, bend) -> (corners, ok)
+ * refine_quads(gray, height, width, quads, radii, iterations, count, end_gap, lut, bend, force[, max_iterations,
+ *              tol]) -> (corners, ok)
  *     (bend: stage 8b, bend_one, on every quad refined)
  *     gray: uint8 (H, W) bytes; quads: float64 (K, 4, 2); radii: int64 (K,); lut: float64 (256,),
  *     increasing; returns float64 (K, 4, 2) corners (the input where refinement failed) and
@@ -239,6 +243,7 @@ static int curved_corners(const double cur[8], const double normal[4][2], const 
 #define BEND_GAP 0.08
 /* Markers with no side this long (px) keep straight sides: a lens bends a short side by a
  * small fraction of a pixel (the bend grows with the square of the length). */
+#define SHRINK 0.8 /* a pass beyond `iterations` must shrink the largest corner move by this, or is not taken (refine.py) */
 #define BEND_MIN_SIDE 40.0
 
 static double longest_side(const double q[8]) {
@@ -309,14 +314,15 @@ static void bend_one(const image *im, double q[8], int64_t r, int force, double 
 
 /* Refine one quad q (4, 2) in place; 1 on success (q is left as given otherwise). `work`
  * holds 4 * count * (7 + 2 r + 1) doubles. */
-static int refine_one(const image *im, double q[8], int64_t r, int iterations, int64_t count, double end_gap, int force,
-                      double *work) {
+static int refine_one(const image *im, double q[8], int64_t r, int iterations, int max_iterations, double tol,
+                      int64_t count, double end_gap, int force, double *work) {
     const int64_t width = 2 * r + 1, n4 = 4 * count;
     double *p_in = work, *p_out = work + n4, *sorted = work + 2 * n4, *ex = work + 3 * n4, *ey = work + 4 * n4;
     double *wt = work + 5 * n4, *res = work + 6 * n4, *prof = work + 7 * n4;
-    double cur[8];
+    double cur[8], last_move = HUGE_VAL;
+    int converging = 1;
     memcpy(cur, q, sizeof(cur));
-    for (int it = 0; it < iterations; it++) {
+    for (int it = 0; it < max_iterations; it++) {
         double normal[4][2];
         for (int s = 0; s < 4; s++) { /* sample every profile */
             const double *a = cur + 2 * s, *b = cur + 2 * ((s + 1) % 4);
@@ -370,7 +376,7 @@ static int refine_one(const image *im, double q[8], int64_t r, int iterations, i
             }
             if (n_good < 3) return 0;
             tls_line(px, py, w, count, lines[s]);
-            if (it == iterations - 1) { /* drop the outliers of the first fit and fit again */
+            if (it >= iterations - 1) { /* drop the outliers of the first fit and fit again */
                 double *l = lines[s], sw = 0, ss = 0;
                 for (int64_t m = 0; m < count; m++) {
                     res[m] = fabs(px[m] * l[0] + py[m] * l[1] - l[2]);
@@ -396,7 +402,14 @@ static int refine_one(const image *im, double q[8], int64_t r, int iterations, i
             if (!(d <= move)) move = d; /* NaN propagates */
         }
         if (!(move <= 2.0 * (double)r + 1.0)) return 0;
+        /* passes beyond `iterations` only while every pass shrank the move (blur); where noise
+         * moves the sides about as much each pass, or a side walks off, the last one is kept */
+        int shrank = move <= SHRINK * last_move;
+        if (it >= iterations && !shrank) break;
         memcpy(cur, next, sizeof(cur));
+        converging &= shrank;
+        if (it >= iterations - 1 && (move <= tol || !converging)) break;
+        last_move = move;
     }
     memcpy(q, cur, sizeof(cur));
     return 1;
@@ -406,19 +419,22 @@ static PyObject *refine_quads(PyObject *self, PyObject *args) {
     (void)self;
     Py_buffer gray, quads, radii, lut;
     Py_ssize_t h, w, count;
-    int iterations, bend, force;
-    double end_gap;
-    if (!PyArg_ParseTuple(args, "y*nny*y*indy*pp", &gray, &h, &w, &quads, &radii, &iterations, &count, &end_gap,
-                          &lut, &bend, &force))
+    int iterations, bend, force, max_iterations = 0;
+    double end_gap, tol = 0.0;
+    if (!PyArg_ParseTuple(args, "y*nny*y*indy*pp|id", &gray, &h, &w, &quads, &radii, &iterations, &count, &end_gap,
+                          &lut, &bend, &force, &max_iterations, &tol))
         return NULL;
+    if (max_iterations < iterations) max_iterations = iterations; /* 0 (not given): exactly `iterations` */
     Py_ssize_t k = quads.len / (8 * (Py_ssize_t)sizeof(double));
     const char *bad = NULL;
     if (h <= 0 || w <= 0 || gray.len != h * w)
         bad = "gray: expected height x width bytes";
     else if (quads.len != k * 8 * (Py_ssize_t)sizeof(double) || radii.len != k * (Py_ssize_t)sizeof(int64_t))
         bad = "quads/radii: expected K x 4 x 2 float64 and K int64 values";
-    else if (count < 2 || count > 10000 || iterations < 1 || iterations > 100)
+    else if (count < 2 || count > 10000 || iterations < 1 || max_iterations > 100)
         bad = "count must be 2 to 10000 and iterations 1 to 100";
+    else if (!(tol >= 0.0))
+        bad = "tolerance must be >= 0";
     else if (!(end_gap >= 0.0 && end_gap < 0.5))
         bad = "end_gap must be in [0, 0.5)";
     else if (lut.len != 256 * (Py_ssize_t)sizeof(double))
@@ -447,7 +463,7 @@ static PyObject *refine_quads(PyObject *self, PyObject *args) {
             image im = {(const uint8_t *)gray.buf, h, w, (const double *)lut.buf};
             Py_BEGIN_ALLOW_THREADS
             for (Py_ssize_t i = 0; i < k; i++) {
-                flag[i] = (uint8_t)refine_one(&im, c + 8 * i, rad[i], iterations, count, end_gap, force, work);
+                flag[i] = (uint8_t)refine_one(&im, c + 8 * i, rad[i], iterations, max_iterations, tol, count, end_gap, force, work);
                 if (flag[i] && bend && longest_side(c + 8 * i) >= BEND_MIN_SIDE)
                     bend_one(&im, c + 8 * i, rad[i], force, work);
             }
@@ -464,7 +480,8 @@ static PyObject *refine_quads(PyObject *self, PyObject *args) {
 
 static PyMethodDef methods[] = {
     {"refine_quads", refine_quads, METH_VARARGS,
-     "refine_quads(gray, height, width, quads, radii, iterations, count, end_gap, lut, bend) -> (corners, ok)\n\n"
+     "refine_quads(gray, height, width, quads, radii, iterations, count, end_gap, lut, bend, force[, max_iterations, tol])"
+     " -> (corners, ok)\n\n"
      "Stage 8 for K quads; see visloc.markers.refine.refine_quads."},
     {NULL, NULL, 0, NULL},
 };

@@ -131,6 +131,15 @@ class DetectorParams:
         AprilGrid, where each tag touches the board's corner squares), stage 3b runs with a
         2 px square on the first pass's binary image, and stages 6-10 on the candidates it
         adds. Frames without such a marker pay only the look at the found markers' corners.
+        Otherwise, in a frame of tightly packed small markers (two markers shorter than
+        ``small_side`` whose margins together are under 0.3 of a marker), stage 3b runs
+        within one marker side of the small markers that have another marker within three
+        of their sides: on a tag sheet seen from afar a neighbour whose margin is a pixel or
+        two merges with the dark around it (on a real photo of 25 tags, one more found).
+        Marker grids printed with gaps of half a marker or more do not pay for the look.
+    small_side : float
+        Stage 3c's bound (full-resolution px, square root of the area) below which a found
+        marker in a group has the eroded search run around it; 0: never.
     base_height : int
         Images whose short side exceeds this are searched at the base scale
         ``short side / base_height`` (stages 8-10 always use full resolution).
@@ -154,6 +163,12 @@ class DetectorParams:
         Stage 8 profiles across each side (more average more noise away).
     refine_iterations : int
         Stage 8 passes.
+    refine_max_iterations : int
+        Stage 8 passes at most: after ``refine_iterations``, quads whose corners still moved
+        more than ``refine_tolerance`` px go on (strong blur, wider than the profiles, lets
+        each pass move a side only part of the way).
+    refine_tolerance : float
+        Largest corner move (px) of a converged stage 8 pass.
     bend : bool
         Stage 8b on/off: the corners where the sides, fitted as quadratic curves in stage 8's
         last pass, meet (lens distortion bends straight sides; a side stays a line unless its
@@ -203,6 +218,7 @@ class DetectorParams:
     min_pass_size: int = 100
     erode: int = 0
     board_retry: bool = True
+    small_side: float = 30.0
     base_height: int = 540
     blur_sigma: float = 0.6
     offset: float = 7.0
@@ -212,6 +228,8 @@ class DetectorParams:
     refine: bool = True
     refine_radius: int | None = None
     refine_iterations: int = 2
+    refine_max_iterations: int = 6
+    refine_tolerance: float = 0.05
     refine_max_radius: int = 5
     refine_profiles: int = 24
     bend: bool = True
@@ -472,13 +490,37 @@ class MarkerDetector:
                  & (bad[:, ~frame].sum(axis=1) <= int(self.dictionary.max_correction * p.error_correction_rate)))
         return confidence, clear
 
-    def _eroded(self, found: _PassImage, width: int) -> _PassImage:
+    def _eroded(self, found: _PassImage, width: int, around: NDArray | None = None) -> _PassImage:
         """Stage 3b: stages 4-5 again on a pass's binary image with its ink eroded by a
-        square ``width`` px wide."""
-        binary = cv2.erode(found.binary, np.ones((width, width), np.uint8))
-        return self._polygons(replace(found, binary=binary,
-                                      found=find_candidates(binary, params=found.candidates,
-                                                            native=self.params.native)))
+        square ``width`` px wide; with ``around`` (K, 4, 2 full-resolution corners) only
+        within one marker side of those markers' bounding boxes (only that part of the image
+        is eroded and followed)."""
+        kernel = np.ones((width, width), np.uint8)
+        if around is None:
+            binary = cv2.erode(found.binary, kernel)
+            return self._polygons(replace(found, binary=binary,
+                                          found=find_candidates(binary, params=found.candidates,
+                                                                native=self.params.native)))
+        h, w = found.binary.shape
+        lo, hi = around.min(axis=1), around.max(axis=1)  # (K, 2)
+        side = (hi - lo).max(axis=1, keepdims=True)
+        lo = np.clip(np.floor((lo - side) / found.scale), 0, (w - 1, h - 1)).astype(int)
+        hi = np.clip(np.ceil((hi + side) / found.scale), 0, (w - 1, h - 1)).astype(int)
+        (x0, y0), (x1, y1) = lo.min(axis=0).tolist(), hi.max(axis=0).tolist()
+        crop = cv2.erode(found.binary[y0:y1 + 1, x0:x1 + 1], kernel)
+        mask = np.zeros_like(crop)
+        for (a, b), (c, d) in zip((lo - (x0, y0)).tolist(), (hi - (x0, y0)).tolist(), strict=True):
+            mask[b:d + 1, a:c + 1] = 255
+        crop &= mask
+        # the whole pass image's contour-length bounds on the crop (they scale with the image side)
+        f = max(h, w) / max(crop.shape)
+        bounds = replace(found.candidates, min_perimeter_rate=found.candidates.min_perimeter_rate * f,
+                         max_perimeter_rate=found.candidates.max_perimeter_rate * f)
+        origin = np.array([x0, y0], np.int32)
+        cands = [(c + origin, q + origin) for c, q in find_candidates(crop, params=bounds, native=self.params.native)]
+        binary = np.zeros_like(found.binary)
+        binary[y0:y1 + 1, x0:x1 + 1] = crop
+        return self._polygons(replace(found, binary=binary, found=cands))
 
     def _passes(self, gray: NDArray[np.uint8], passes: list[SearchPass], base: float,
                 keep: list[_PassImage]) -> Iterator[_PassImage]:
@@ -534,11 +576,15 @@ class MarkerDetector:
             passes = [sp for k, sp in enumerate(p.passes) if k == 0 or short / sp.scale >= p.min_pass_size]
         first: list[_PassImage] = []
         dets = self._find(gray, self._passes(gray, passes, base, first), inverted, log)
-        if p.board_retry and not p.erode and first and self._on_board(gray, dets):  # stage 3c
+        if p.board_retry and not p.erode and first and dets:  # stage 3c
             found = np.array([d.corners for d in dets])
-            more = self._find(gray, iter([self._eroded(first[0], 2)]), inverted, log, taken=found)
-            if more:
-                dets = _merge_duplicates([(d, abs(float(_areas(d.corners)))) for d in dets + more])
+            board = self._on_board(gray, dets)
+            small = _small_in_group(found, p.small_side)
+            if board or small.any():  # a board: everywhere; else only around the small markers
+                more = self._find(gray, iter([self._eroded(first[0], 2, None if board else found[small])]), inverted,
+                                  log, taken=found)
+                if more:
+                    dets = _merge_duplicates([(d, abs(float(_areas(d.corners)))) for d in dets + more])
         return dets
 
     def _on_board(self, gray: NDArray[np.uint8], dets: list[MarkerDetection]) -> bool:
@@ -629,6 +675,7 @@ class MarkerDetector:
             side = np.sqrt(np.abs(_areas(quads)))
             radii = p.refine_radius or np.clip(np.round(0.4 * side / n_cells), 1, p.refine_max_radius).astype(int)
             corners, refined = refine_quads(gray, quads, radius=radii, iterations=p.refine_iterations,
+                                            max_iterations=p.refine_max_iterations, tolerance=p.refine_tolerance,
                                             count=p.refine_profiles, response=self._luts[inverted],
                                             bend=p.bend, native=p.native)  # stages 8 and 8b
         cells, (valid, bits, margin, contrast, thr) = read_cells(  # stage 9, batched
@@ -741,6 +788,37 @@ def _areas(q: NDArray) -> NDArray:
     """Signed areas of quads (..., 4, 2); positive for clockwise quads in y-down images."""
     x, y = q[..., 0], q[..., 1]
     return 0.5 * ((x * y[..., _NEXT]).sum(-1) - (x[..., _NEXT] * y).sum(-1))
+
+
+def _small_in_group(quads: NDArray, small_side: float, packed: float = 1.3) -> NDArray[np.bool_]:
+    """(K,): the found markers (K, 4, 2) that stage 3c looks around in a frame of tightly
+    packed small tags: small ones (side, the square root of the area, below ``small_side`` px)
+    with another found marker within three of their sides (centre to centre), when at least
+    two small ones stand closer than ``packed`` times their half extents along the line
+    between their centres (the two margins together under 0.3 of a marker: a tag sheet seen
+    from afar; a marker grid printed with gaps of half a marker stands at 1.5 in any view)."""
+    none = np.zeros(len(quads), bool)
+    side = np.sqrt(np.abs(_areas(quads)))
+    small = side < small_side
+    if small.sum() < 2:
+        return none
+    c = quads.mean(axis=1)
+    diff = c[:, None, :] - c[None, :, :]  # (K, K, 2)
+    dist = np.sqrt((diff**2).sum(axis=2))
+    np.fill_diagonal(dist, np.inf)
+    near = small[:, None] & small[None, :] & (dist < 3.0 * side[:, None])
+    i, j = np.nonzero(np.triu(near, 1))
+    if not len(i):
+        return none
+    u = diff[i, j] / dist[i, j, None]  # (P, 2) unit vectors between the pairs' centres
+
+    def half_extent(k: NDArray) -> NDArray:
+        p = (quads[k] * u[:, None, :]).sum(axis=2)  # (P, 4) corners along u
+        return 0.5 * (p.max(axis=1) - p.min(axis=1))
+
+    if not (dist[i, j] < packed * (half_extent(i) + half_extent(j))).any():
+        return none
+    return small & (dist < 3.0 * side[:, None]).any(axis=1)
 
 
 def _same(quads: NDArray) -> NDArray[np.bool_]:

@@ -138,3 +138,18 @@ def test_tracking_falls_back_to_the_block_sums_on_a_jump(flight):
     assert not gv.motion.method.endswith("+tracked") and ego.last_field is not None
     step = estimate_ground_velocity(fl.frames[6], fl.frames[7], cam, 1.0, 1 / 60, direct=True).motion
     np.testing.assert_allclose(gv.motion.translation, step.translation + (-40, 25), atol=1.0)
+
+
+def test_the_grid_is_fine_in_slow_flight_and_coarse_at_flight_speed():
+    from visloc.flow.direct import FAST_SHIFT, auto_stride
+    from visloc.flow.motion import GlobalMotion
+
+    def motion(tx, rotation=0.0):
+        return GlobalMotion(np.array([tx, 0.0]), rotation, 1.0, None, 0.0, 10, "similarity")
+
+    assert auto_stride((240, 320), motion(0.5)) == 2
+    assert auto_stride((240, 320), motion(0.5, rotation=0.03)) == 2  # yaw moves the corners, not the centre
+    assert auto_stride((240, 320), motion(FAST_SHIFT + 0.1)) == 4
+    assert auto_stride((480, 640), motion(0.5)) == 4 and auto_stride((480, 640), motion(5.0)) == 8
+    with pytest.raises(ValueError, match="stride"):
+        refine_motion(np.zeros((64, 64), np.uint8), np.zeros((64, 64), np.uint8), motion(0.0), stride=0)

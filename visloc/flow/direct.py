@@ -27,7 +27,7 @@ from visloc._compiled import use_compiled
 from visloc.flow.motion import _rotation_centre
 from visloc.types import GlobalMotion
 
-__all__ = ["NATIVE_DIRECT", "blurred", "direct_options", "refine_blurred", "refine_motion"]
+__all__ = ["FAST_SHIFT", "NATIVE_DIRECT", "auto_stride", "blurred", "direct_options", "refine_blurred", "refine_motion"]
 
 try:
     from visloc.flow import _direct
@@ -60,10 +60,10 @@ def refine_motion(prev: NDArray[np.uint8], curr: NDArray[np.uint8], motion: Glob
         corner more than 1 px from ``motion``, the alignment runs from both, and the one from
         ``prior`` is kept unless its residual spread exceeds 1.25 times the other's.
     stride : int, optional
-        Grid step of the candidate points, px (>= 1); by default a 120th of the short side
-        (2 px at 320 x 240, 4 px at 640 x 480: about 8,500 points kept at ``keep=0.5``). On
-        camera-like 320 x 240 flights (``bench/flow.py``) 4 px gave a median relative error of
-        0.33 % and 1.17 % in slow flight, 2 px 0.29 % and 0.80 %, at about twice the time.
+        Grid step of the candidate points, px (>= 1); by default :func:`auto_stride`: a 120th
+        of the short side (2 px at 320 x 240: about 8,500 points kept at ``keep=0.5``) for
+        translations under :data:`FAST_SHIFT` px per frame, where the points' noise weighs on
+        the result, a 60th above (a quarter of the points and of the time).
     keep : float
         Share of the grid points kept, those with the strongest gradients, in (0, 1].
     iterations : int
@@ -106,14 +106,15 @@ def direct_options(shape: tuple[int, int], *, stride: int | None = None, keep: f
     Parameters
     ----------
     shape : (int, int)
-        ``(H, W)`` of the frames, px (``stride`` None: a 120th of the short side).
+        ``(H, W)`` of the frames, px.
     stride, keep, iterations, tolerance, max_change, native
         As in :func:`refine_motion`.
 
     Returns
     -------
     tuple
-        ``(stride, keep, iterations, tolerance, max_change, compiled)``.
+        ``(stride, keep, iterations, tolerance, max_change, compiled)``; ``stride`` None:
+        chosen by each alignment's start (:func:`auto_stride`).
 
     Raises
     ------
@@ -122,14 +123,13 @@ def direct_options(shape: tuple[int, int], *, stride: int | None = None, keep: f
     RuntimeError
         ``native=True`` but the compiled stage was not built.
     """
-    if stride is None:
-        stride = max(1, round(min(shape) / 120))
-    if isinstance(stride, bool) or int(stride) != stride or stride < 1 or not 0 < keep <= 1 or iterations < 1:
-        raise ValueError(f"stride must be an integer >= 1, keep in (0, 1], iterations >= 1; got {stride}, {keep}, "
-                         f"{iterations}")
+    if stride is not None and (isinstance(stride, bool) or int(stride) != stride or stride < 1):
+        raise ValueError(f"stride must be an integer >= 1 or None, got {stride!r}")
+    if not 0 < keep <= 1 or iterations < 1:
+        raise ValueError(f"keep must be in (0, 1] and iterations >= 1; got {keep}, {iterations}")
     if not tolerance >= 0:
         raise ValueError(f"tolerance must be >= 0 px, got {tolerance!r}")
-    return (int(stride), float(keep), int(iterations), float(tolerance), float(max_change),
+    return (None if stride is None else int(stride), float(keep), int(iterations), float(tolerance), float(max_change),
             use_compiled(native, _direct, "visloc.flow._direct"))
 
 
@@ -195,6 +195,8 @@ def _refine_from(frames: tuple[NDArray[np.float32], NDArray[np.float32]], start:
     first, second = frames
     stride, keep, iterations, tol, max_change, compiled = options
     h, w = first.shape
+    if stride is None:
+        stride = auto_stride((h, w), start)
     if compiled:
         *found, ok = _direct.align(first, second, h, w, _MARGIN, stride, keep, iterations, tol, *_similarity(start))
     else:
@@ -208,6 +210,38 @@ def _refine_from(frames: tuple[NDArray[np.float32], NDArray[np.float32]], start:
     if _corner_shift(moved, start, (w, h)) > max_change or not 0.2 < gain < 5.0:
         return None, math.inf
     return moved, spread
+
+
+#: Image translation (px per frame, at the image centre) from which :func:`auto_stride`
+#: takes the coarse grid
+FAST_SHIFT = 2.0
+
+
+def auto_stride(shape: tuple[int, int], start: GlobalMotion) -> int:
+    """The grid step of the alignment's points for a start motion: a 120th of the short
+    side (2 px at 320 x 240) when ``start`` moves the image centre less than
+    :data:`FAST_SHIFT` px, else a 60th (4 px at 320 x 240, a quarter of the points and of
+    the time).
+
+    In slow flight the translation is a pixel or less per frame and the noise of the points
+    weighs on it (rotation is not counted: the velocity comes from the translation): on camera-like 320 x 240 flights (``bench/flow.py``) the fine grid gave
+    a median relative error of 0.76 % in slow flight and the coarse one 1.16 %; at flight
+    speed both gave 0.27-0.29 %, the coarse one in half the time.
+
+    Parameters
+    ----------
+    shape : (int, int)
+        ``(H, W)`` of the frames, px.
+    start : GlobalMotion
+        The alignment's start, px.
+
+    Returns
+    -------
+    int
+        The grid step, px (>= 1).
+    """
+    fine = math.hypot(*_similarity(start)[2:]) < FAST_SHIFT
+    return max(1, round(min(shape) / (120 if fine else 60)))
 
 
 def blurred(img: NDArray[np.uint8], *, sigma: float = 1.0) -> NDArray[np.float32]:

@@ -213,8 +213,9 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
     _topic(cb)
     cb.add_argument("--board", required=True, metavar="BOARD.yml", help="board file (see visloc render board)")
     cb.add_argument("--out", required=True, metavar="CAMERA.yml", help="camera file to write (OpenCV YAML)")
-    cb.add_argument("--model", default="k1k2p1p2k3", choices=("pinhole-k1k2", "k1k2p1p2k3", "rational"),
-                    help="distortion model (default k1k2p1p2k3, OpenCV's five coefficients)")
+    cb.add_argument("--model", default="k1k2p1p2k3", choices=("pinhole-k1k2", "k1k2p1p2k3", "rational", "fisheye"),
+                    help="distortion model (default k1k2p1p2k3, OpenCV's five coefficients; fisheye: "
+                         "cv2.fisheye's four, for lenses of 120 degrees and more)")
     cb.add_argument("--every", type=_count, default=1, metavar="N", help="use every Nth frame (default 1)")
     cb.add_argument("--min-corners", type=_count, default=6, metavar="N",
                     help="views with fewer board corners are left out (default 6, at least 6)")

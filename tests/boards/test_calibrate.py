@@ -49,7 +49,7 @@ def test_calibrate_api_leaves_out_thin_views(views):
     with pytest.raises(ValueError, match="at least 3 views"):
         calibrate(found[:2], BOARD, (800, 600))
     with pytest.raises(ValueError, match="model"):
-        calibrate(found, BOARD, (800, 600), model="fisheye")
+        calibrate(found, BOARD, (800, 600), model="omnidirectional")  # fisheye is a model now
 
 
 def test_render_board_prints_to_scale(views, tmp_path):
@@ -95,3 +95,54 @@ def test_a_printed_marker_grid_calibrates_the_camera(tmp_path):
     got, K = Camera.from_file(cam), views[0].render.K
     assert np.abs(got.K[[0, 1, 0, 1], [0, 1, 2, 2]] - K[[0, 1, 0, 1], [0, 1, 2, 2]]).max() < 1.0  # px
     assert got.dist[0] == pytest.approx(CALIBRATION_CAMERA.k1, abs=0.01)
+
+
+def _fisheye_views(board, K, D, size, n=12, seed=4):
+    """Board corners seen through a fisheye lens (cv2.fisheye.projectPoints) at varied poses,
+    with 0.05 px of noise: the views a wide-angle camera gives, without a renderer."""
+    from visloc.boards import CharucoCorners
+
+    rng = np.random.default_rng(seed)
+    pts = board.chessboard_corners.astype(np.float64)
+    centre = pts.mean(axis=0)
+    views = []
+    while len(views) < n:
+        rvec = np.array([rng.uniform(-0.6, 0.6), rng.uniform(-0.6, 0.6), rng.uniform(-np.pi, np.pi)])
+        R = cv2.Rodrigues(rvec)[0]
+        # the board centre anywhere in a cone of 55 degrees, 0.12-0.3 m away
+        direction = np.array([*rng.uniform(-1.4, 1.4, 2), 1.0])
+        tvec = direction / np.linalg.norm(direction) * rng.uniform(0.12, 0.3) - R @ centre
+        cam = pts @ R.T + tvec
+        if (cam[:, 2] <= 0.02).any():
+            continue
+        px = cv2.fisheye.projectPoints(cam.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), K, D)[0].reshape(-1, 2)
+        inside = (px[:, 0] >= 0) & (px[:, 0] < size[0]) & (px[:, 1] >= 0) & (px[:, 1] < size[1])
+        if inside.sum() < 12:
+            continue
+        ids = np.flatnonzero(inside)
+        views.append(CharucoCorners(ids.astype(np.int64), px[ids] + rng.normal(0, 0.05, (len(ids), 2))))
+    return views
+
+
+def test_fisheye_model_recovers_a_wide_angle_camera(tmp_path):
+    # a 190-degree-class lens: f = 250 px on 800 x 600, k1..k4 of a real fisheye
+    board = CharucoBoard(9, 6, 0.03, 0.022, "DICT_5X5_100")
+    K = np.array([[250.0, 0.0, 401.3], [0.0, 250.0, 297.8], [0.0, 0.0, 1.0]])
+    D = np.array([0.021, -0.008, 0.0015, -0.0003])
+    size = (800, 600)
+    views = _fisheye_views(board, K, D, size)
+    cal = calibrate(views, board, size, model="fisheye")
+    assert cal.model == "fisheye" and cal.dist.shape == (4,) and np.isnan(cal.std).all()
+    assert abs(cal.K[0, 0] - 250.0) < 0.5 and abs(cal.K[1, 1] - 250.0) < 0.5
+    assert abs(cal.K[0, 2] - 401.3) < 0.5 and abs(cal.K[1, 2] - 297.8) < 0.5
+    assert np.abs(cal.dist - D).max() < 0.01
+    assert cal.rms < 0.1 and len(cal.per_view) == len(cal.views)
+    # the pinhole models cannot follow the lens: their reprojection error is far larger
+    assert calibrate(views, board, size, model="k1k2p1p2k3").rms > 5 * cal.rms
+    # the camera file carries the model, and the camera projects as the lens does
+    cam = Camera.from_file(cal.to_file(tmp_path / "fisheye.yml"))
+    assert cam.model == "fisheye" and np.allclose(cam.dist, cal.dist)
+    p = np.array([[0.3, -0.2, 0.25], [-0.1, 0.05, 0.4]])
+    expected = cv2.fisheye.projectPoints(p.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), cal.K, cal.dist)[0]
+    assert np.allclose(cam.project(p), expected.reshape(-1, 2))
+    assert np.allclose(cam.normalize(cam.project(p)), p[:, :2] / p[:, 2:], atol=1e-9)

@@ -217,3 +217,17 @@ def test_point_shapes() -> None:
         cam.undistort_points(np.zeros((3, 3)))
     with pytest.raises(ValueError, match="points_cam"):
         cam.project(np.zeros((3, 2)))
+
+
+def test_fisheye_camera_checks_its_model_and_keeps_it():
+    K = np.array([[250.0, 0.0, 319.5], [0.0, 250.0, 239.5], [0.0, 0.0, 1.0]])
+    cam = Camera(K, None, (640, 480), model="fisheye")
+    assert cam.dist.shape == (4,) and cam.has_distortion  # r = f theta is not the pinhole's r = f tan(theta)
+    # an ideal equidistant lens: a ray 60 degrees off the axis lands f * pi / 3 from the centre
+    px = cam.project(np.array([[np.sin(np.pi / 3), 0.0, np.cos(np.pi / 3)]]))
+    assert np.allclose(px, [[319.5 + 250.0 * np.pi / 3, 239.5]])
+    assert cam.scaled(320, 240).model == "fisheye" and "fisheye" in repr(cam)
+    with pytest.raises(ValueError, match="4 distortion coefficients"):
+        Camera(K, np.zeros(5), model="fisheye")
+    with pytest.raises(ValueError, match="model must be one of"):
+        Camera(K, model="orthographic")

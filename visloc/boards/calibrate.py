@@ -1,7 +1,8 @@
 """Camera calibration from a board's corners in several views: ``cv2.calibrateCamera``.
 
 The solver is OpenCV's (``calibrateCameraExtended``: Levenberg-Marquardt over the intrinsics,
-the distortion and every view's pose, started from Zhang's closed form); visloc brings the
+the distortion and every view's pose, started from Zhang's closed form; ``cv2.fisheye.calibrate``
+for the fisheye model); visloc brings the
 corners (:func:`visloc.boards.detect_charuco`) and the bookkeeping: views with too few corners
 are left out, and the result carries the RMS reprojection error, each view's error and the
 parameters' standard deviations, written into the camera file ``Camera.from_file`` reads.
@@ -23,13 +24,17 @@ __all__ = ["CALIBRATION_MODELS", "Calibration", "calibrate"]
 
 FloatArray = NDArray[np.float64]
 
-#: Distortion models: name -> ``cv2.calibrateCamera`` flags. ``pinhole-k1k2``: two radial
-#: terms; ``k1k2p1p2k3``: OpenCV's default five; ``rational``: eight (k4-k6 in the denominator).
+#: Distortion models: name -> solver flags. ``pinhole-k1k2``: two radial terms;
+#: ``k1k2p1p2k3``: OpenCV's default five; ``rational``: eight (k4-k6 in the denominator)
+#: (``cv2.calibrateCamera``); ``fisheye``: ``cv2.fisheye``'s equidistant model with four
+#: coefficients (``cv2.fisheye.calibrate``), for lenses of 120 degrees and more.
 CALIBRATION_MODELS = {
     "pinhole-k1k2": cv2.CALIB_FIX_K3 | cv2.CALIB_ZERO_TANGENT_DIST,
     "k1k2p1p2k3": 0,
     "rational": cv2.CALIB_RATIONAL_MODEL,
+    "fisheye": cv2.CALIB_RECOMPUTE_EXTRINSIC | cv2.CALIB_FIX_SKEW,  # OpenCV 5: one set of flags
 }
+_FISHEYE_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12)
 
 
 @dataclass(frozen=True, eq=False)
@@ -41,7 +46,8 @@ class Calibration:
     K : ndarray (3, 3)
         Camera matrix, px (pixel centres at integer coordinates).
     dist : ndarray (n,)
-        OpenCV distortion coefficients (k1, k2, p1, p2, k3[, k4, k5, k6]).
+        OpenCV distortion coefficients (k1, k2, p1, p2, k3[, k4, k5, k6]; the fisheye model's
+        k1-k4).
     size : (int, int)
         ``(width, height)`` of the images, px.
     rms : float
@@ -49,7 +55,8 @@ class Calibration:
     per_view : ndarray (V,)
         Each used view's RMS reprojection error, px.
     std : ndarray (4 + n,)
-        Standard deviations of fx, fy, cx, cy (px) and the distortion coefficients.
+        Standard deviations of fx, fy, cx, cy (px) and the distortion coefficients (NaN for
+        the fisheye model: ``cv2.fisheye.calibrate`` gives none).
     views : list of int
         Indices of the views used (into the list given to :func:`calibrate`).
     model : str
@@ -69,6 +76,16 @@ class Calibration:
     rvecs: FloatArray
     tvecs: FloatArray
 
+    @property
+    def camera(self) -> Camera:
+        """The calibrated :class:`~visloc.pose.camera.Camera` (fisheye for the fisheye model)."""
+        return Camera(self.K, self.dist, size=self.size, model="fisheye" if self.model == "fisheye" else "pinhole")
+
+    def project(self, points: NDArray, view: int) -> FloatArray:
+        """Pixels (N, 2) of board points (N, 3) in the ``view``-th used view (its solved pose)."""
+        R = cv2.Rodrigues(np.asarray(self.rvecs[view], np.float64))[0]
+        return self.camera.project(np.asarray(points, np.float64) @ R.T + self.tvecs[view])
+
     def to_file(self, path: str | Path) -> Path:
         """Write the camera file (OpenCV FileStorage YAML, as ``Camera.from_file`` reads it)
         with the calibration's figures.
@@ -87,7 +104,7 @@ class Calibration:
                  "per_view_rms_px": np.asarray(self.per_view, np.float64).reshape(1, -1),
                  "std_fx_fy_cx_cy_dist": np.asarray(self.std, np.float64).reshape(1, -1),
                  "views_used": len(self.views)}
-        Camera(self.K, self.dist, size=self.size).to_file(path, extra=extra)
+        self.camera.to_file(path, extra=extra)
         return path
 
 
@@ -131,9 +148,46 @@ def calibrate(views: list[CharucoCorners], board: CharucoBoard, size: tuple[int,
     obj = [board.chessboard_corners[views[i].ids].astype(np.float32) for i in used]
     img = [views[i].corners.astype(np.float32).reshape(-1, 1, 2) for i in used]
     flags = CALIBRATION_MODELS[model]
+    if model == "fisheye":
+        return _fisheye(obj, img, (w, h), used, flags)
     rms, K, dist, rvecs, tvecs, std_in, _, per_view = cv2.calibrateCameraExtended(
         obj, img, (w, h), None, None, flags=flags)
     n = len(np.ravel(dist)) if model != "pinhole-k1k2" else 5
     return Calibration(np.asarray(K, np.float64), np.ravel(dist).astype(np.float64)[:n], (w, h), float(rms),
                        np.ravel(per_view).astype(np.float64), np.ravel(std_in).astype(np.float64)[: 4 + n], used,
                        model, np.array(rvecs, np.float64).reshape(-1, 3), np.array(tvecs, np.float64).reshape(-1, 3))
+
+
+def _fisheye(obj: list[NDArray], img: list[NDArray], size: tuple[int, int], used: list[int],
+             flags: int) -> Calibration:
+    """``cv2.fisheye.calibrate`` on the views' corners; each view's RMS reprojection error from
+    its solved pose (the solver gives no per-view errors nor standard deviations).
+
+    The solver is started from the principal point at the image centre and a focal length of
+    (longer side) / pi (an equidistant lens seeing 180 degrees across it), then of (longer
+    side) / 2 and (longer side) / (pi / 2), the lowest RMS kept: from its own start it can
+    wander off (negative focal lengths) on wide-angle views."""
+    obj64 = [o.reshape(1, -1, 3).astype(np.float64) for o in obj]  # (1, N, 3): what the solver takes
+    img64 = [i.reshape(1, -1, 2).astype(np.float64) for i in img]
+    w, h = size
+    best, error = None, "no start converged"
+    for f0 in (max(w, h) / np.pi, max(w, h) / 2.0, max(w, h) / (np.pi / 2.0)):
+        K0 = np.array([[f0, 0.0, (w - 1) / 2.0], [0.0, f0, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
+        try:
+            found = cv2.fisheye.calibrate(obj64, img64, size, K0, np.zeros(4), flags=flags | cv2.CALIB_USE_INTRINSIC_GUESS,
+                                          criteria=_FISHEYE_CRITERIA)
+        except cv2.error as exc:
+            error = str(exc).strip().splitlines()[-1]
+            continue
+        if found[1][0, 0] > 0 and found[1][1, 1] > 0 and np.isfinite(found[0]) and (best is None or found[0] < best[0]):
+            best = found
+    if best is None:
+        raise ValueError(f"the fisheye calibration did not converge: {error}")
+    rms, K, dist, rvecs, tvecs = best
+    K, dist = np.asarray(K, np.float64), np.ravel(dist).astype(np.float64)
+    per_view = []
+    for o, i, r, t in zip(obj64, img64, rvecs, tvecs, strict=True):
+        proj, _ = cv2.fisheye.projectPoints(o, r, t, K, dist)
+        per_view.append(float(np.sqrt(np.mean(np.sum((proj - i) ** 2, axis=2)))))
+    return Calibration(K, dist, size, float(rms), np.array(per_view), np.full(8, np.nan), used, "fisheye",
+                       np.array(rvecs, np.float64).reshape(-1, 3), np.array(tvecs, np.float64).reshape(-1, 3))

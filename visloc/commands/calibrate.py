@@ -122,9 +122,9 @@ def _write_coverage(path: Path, cal, views, board: CharucoBoard) -> None:
         v = views[i]
         colour = tuple(int(c) for c in cv2.applyColorMap(np.uint8([[n * 255 // max(len(cal.views) - 1, 1)]]),
                                                            cv2.COLORMAP_TURBO)[0, 0])
-        proj = cv2.projectPoints(board.chessboard_corners[v.ids], cal.rvecs[n], cal.tvecs[n], cal.K, cal.dist)[0]
+        proj = cal.project(board.chessboard_corners[v.ids], n)
         starts = np.rint(v.corners).astype(int)
-        ends = np.rint(v.corners + ARROW_SCALE * (proj.reshape(-1, 2) - v.corners)).astype(int)
+        ends = np.rint(v.corners + ARROW_SCALE * (proj - v.corners)).astype(int)
         for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
             cv2.circle(img, tuple(a), 3, colour, -1)
             cv2.arrowedLine(img, tuple(a), tuple(b), (0, 0, 0), 1, tipLength=0.3)

@@ -1,6 +1,8 @@
-"""Pinhole camera with OpenCV's lens-distortion model.
+"""Pinhole camera with OpenCV's lens-distortion model, or OpenCV's fisheye model.
 
-:class:`Camera` holds the intrinsic matrix ``K``, OpenCV distortion coefficients and,
+:class:`Camera` holds the intrinsic matrix ``K``, OpenCV distortion coefficients, the model
+(``"pinhole"``: ``cv2.projectPoints``' polynomial distortion; ``"fisheye"``: ``cv2.fisheye``'s
+equidistant projection with four coefficients, for lenses of 120 degrees and more) and,
 optionally, the image size the calibration belongs to. It reads and writes OpenCV
 FileStorage YAML (the format of ``calib/*.yml`` and of OpenCV's calibration tools) and maps
 points between pixels, undistorted pixels and normalized image coordinates.
@@ -28,6 +30,9 @@ if TYPE_CHECKING:
 
 #: Numbers of distortion coefficients OpenCV accepts.
 DIST_SIZES = (4, 5, 8, 12, 14)
+#: Camera models: OpenCV's pinhole with polynomial distortion, and its fisheye (``cv2.fisheye``:
+#: ``r = f theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8)``).
+MODELS = ("pinhole", "fisheye")
 
 # Undistortion is iterative; OpenCV's default (5 iterations) leaves ~0.01 px of error at the
 # border of a strongly distorted 640x480 image (k1 = -0.3). This converges to ~1e-12 px.
@@ -59,20 +64,26 @@ class Camera:
         Skew must be zero (OpenCV's distortion model ignores it).
     dist : array_like (4,), (5,), (8,), (12,) or (14,), optional
         OpenCV distortion coefficients ``(k1, k2, p1, p2[, k3[, k4, k5, k6[, s1..s4[, tx, ty]]]])``;
-        ``None`` means no distortion (stored as ``zeros(5)``).
+        ``None`` means no distortion (stored as ``zeros(5)``). With ``model="fisheye"``: the
+        four coefficients ``(k1, k2, k3, k4)`` of ``cv2.fisheye`` (``None``: zeros, the
+        ideal equidistant lens).
     size : (int, int), optional
         ``(width, height)`` in pixels of the images the calibration belongs to.
+    model : {"pinhole", "fisheye"}
+        The projection (:data:`MODELS`).
 
     Attributes
     ----------
     K : ndarray (3, 3) float64, read-only
     dist : ndarray (n,) float64, read-only
     size : tuple (width, height) or None
+    model : str
     """
 
     K: FloatArray
     dist: FloatArray | None = None
     size: tuple[int, int] | None = None
+    model: str = "pinhole"
     _distorted: bool = field(init=False, default=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -89,8 +100,11 @@ class Camera:
             raise ValueError(
                 f"K must have zero skew (K[0, 1] = K[1, 0] = 0), got {K[0, 1]}, {K[1, 0]}"
             )
+        if self.model not in MODELS:
+            raise ValueError(f"model must be one of {', '.join(MODELS)}, got {self.model!r}")
+        fisheye = self.model == "fisheye"
         if self.dist is None:
-            dist = np.zeros(5)
+            dist = np.zeros(4 if fisheye else 5)
         else:
             dist = np.array(self.dist, dtype=np.float64).reshape(-1)
             if dist.size not in DIST_SIZES:
@@ -100,6 +114,8 @@ class Camera:
                 )
             if not np.all(np.isfinite(dist)):
                 raise ValueError(f"dist must be finite, got {dist.tolist()}")
+            if fisheye and dist.size != 4:
+                raise ValueError(f"a fisheye camera has 4 distortion coefficients (k1..k4), got {dist.size}")
         size = self.size
         if size is not None:
             try:
@@ -112,7 +128,8 @@ class Camera:
         object.__setattr__(self, "K", _readonly(K))
         object.__setattr__(self, "dist", _readonly(dist))
         object.__setattr__(self, "size", size)
-        object.__setattr__(self, "_distorted", bool(np.any(dist != 0.0)))
+        # the fisheye projection (r = f theta) differs from the pinhole one even with k = 0
+        object.__setattr__(self, "_distorted", fisheye or bool(np.any(dist != 0.0)))
 
     # ------------------------------------------------------------------ properties
     @property
@@ -137,15 +154,16 @@ class Camera:
 
     @property
     def has_distortion(self) -> bool:
-        """Whether any distortion coefficient is non-zero."""
+        """Whether any distortion coefficient is non-zero (always, for a fisheye camera)."""
         return self._distorted
 
     def __repr__(self) -> str:
         size = "None" if self.size is None else f"({self.size[0]}, {self.size[1]})"
         dist = ", ".join(f"{d:.6g}" for d in self.dist) if self.has_distortion else "none"
+        model = ", model='fisheye'" if self.model == "fisheye" else ""
         return (
             f"Camera(fx={self.fx:.6g}, fy={self.fy:.6g}, cx={self.cx:.6g}, cy={self.cy:.6g}, "
-            f"dist=[{dist}], size={size})"
+            f"dist=[{dist}], size={size}{model})"
         )
 
     # ------------------------------------------------------------------ constructors
@@ -196,7 +214,9 @@ class Camera:
         """Read an OpenCV FileStorage file (YAML/XML/JSON).
 
         Reads ``camera_matrix`` (required), ``distortion_coefficients`` (optional, zeros when
-        absent) and ``image_width`` / ``image_height`` (optional, ``size=None`` when absent).
+        absent), ``image_width`` / ``image_height`` (optional, ``size=None`` when absent) and
+        ``distortion_model`` (optional: ``fisheye`` gives a fisheye camera, any other value or
+        none a pinhole one, as ``visloc calibrate --model`` writes it).
 
         Raises
         ------
@@ -211,6 +231,8 @@ class Camera:
             dist = cls._read_matrix(fs, "distortion_coefficients", path, required=False)
             w = cls._read_int(fs, "image_width", path)
             h = cls._read_int(fs, "image_height", path)
+            node = fs.getNode("distortion_model")
+            model = "fisheye" if node.isString() and node.string().strip().lower() == "fisheye" else "pinhole"
         finally:
             fs.release()
         if (w is None) != (h is None):
@@ -219,7 +241,7 @@ class Camera:
             )
         try:
             return cls(
-                K, None if dist is None or dist.size == 0 else dist, None if w is None else (w, h)
+                K, None if dist is None or dist.size == 0 else dist, None if w is None else (w, h), model
             )
         except ValueError as exc:
             raise ValueError(f"camera file {str(path)!r}: {exc}") from None
@@ -254,8 +276,9 @@ class Camera:
 
     def to_file(self, path: str | Path, *, extra: dict | None = None) -> None:
         """Write OpenCV FileStorage YAML (``camera_matrix``, ``distortion_coefficients`` and,
-        when ``size`` is known, ``image_width`` / ``image_height``), then the nodes of ``extra``
-        (name -> number, string or array; e.g. a calibration's figures)."""
+        when ``size`` is known, ``image_width`` / ``image_height``; ``distortion_model:
+        fisheye`` for a fisheye camera), then the nodes of ``extra`` (name -> number, string or
+        array; e.g. a calibration's figures)."""
         path = Path(path)
         fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_FORMAT_YAML)
         if not fs.isOpened():
@@ -266,7 +289,10 @@ class Camera:
                 fs.write("image_height", int(self.size[1]))
             fs.write("camera_matrix", np.ascontiguousarray(self.K))
             fs.write("distortion_coefficients", np.ascontiguousarray(self.dist.reshape(-1, 1)))
-            for key, value in (extra or {}).items():
+            extra = dict(extra or {})
+            if self.model == "fisheye":
+                extra["distortion_model"] = "fisheye"
+            for key, value in extra.items():
                 fs.write(key, value)
         finally:
             fs.release()
@@ -289,7 +315,7 @@ class Camera:
         K[1, 1] *= sy
         K[0, 2] = (K[0, 2] + 0.5) * sx - 0.5
         K[1, 2] = (K[1, 2] + 0.5) * sy - 0.5
-        return Camera(K, self.dist.copy(), (int(width), int(height)))
+        return Camera(K, self.dist.copy(), (int(width), int(height)), self.model)
 
     # ------------------------------------------------------------------ point mappings
     def normalize(self, points: ArrayLike) -> FloatArray:
@@ -303,6 +329,9 @@ class Camera:
         if not self.has_distortion:
             return (p - self.K[:2, 2]) / self.K[[0, 1], [0, 1]]
         src = p.reshape(-1, 1, 2)
+        if self.model == "fisheye":
+            out = cv2.fisheye.undistortPoints(src, self.K, self.dist, criteria=_UNDISTORT_CRITERIA)
+            return out.reshape(-1, 2).astype(np.float64, copy=False)
         if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4.x: the iteration criteria's own function
             out = cv2.undistortPointsIter(src, self.K, self.dist, None, None, _UNDISTORT_CRITERIA)
         else:  # OpenCV 5: undistortPoints takes them
@@ -337,6 +366,9 @@ class Camera:
             xy = p[:, :2] / p[:, 2:3]
             return xy * self.K[[0, 1], [0, 1]] + self.K[:2, 2]
         zero = np.zeros(3)
+        if self.model == "fisheye":
+            out, _ = cv2.fisheye.projectPoints(p.reshape(-1, 1, 3), zero, zero, self.K, self.dist)
+            return out.reshape(-1, 2).astype(np.float64, copy=False)
         out, _ = cv2.projectPoints(p.reshape(-1, 1, 3), zero, zero, self.K, self.dist)
         return out.reshape(-1, 2).astype(np.float64, copy=False)
 

@@ -102,3 +102,30 @@ def test_ctrl_c_keeps_the_steps_flown_so_far():
     r = simulate("hover", seed=0, progress=stop_after_two_seconds)
     assert r.status is SimStatus.INTERRUPTED and "interrupted at t = 2" in r.reason
     assert 1.9 < r.t[-1] < 2.1 and np.isfinite(r.state).all() and len(r.t) == len(r.pwm)
+
+
+def test_fly_takes_the_objects_a_user_builds():
+    # simulate() builds a vehicle, a controller and an estimator and flies them; fly() flies
+    # the ones given: the same objects give the same flight, and a vehicle of the user's own
+    # (here a heavier one) flies as built
+    from visloc.control import Controller
+    from visloc.model.propulsion import hover_pwm
+    from visloc.sim import TruthEstimator, Vehicle, fly, get_scenario
+
+    ref = simulate("sidestep", seconds=2.0)
+    sc = get_scenario("sidestep")
+
+    def vehicle(params):
+        v = Vehicle(params, state=np.r_[sc.start_setpoint[:3], np.zeros(5), sc.start_setpoint[3], np.zeros(3)])
+        v.trim(np.full(4, hover_pwm(params)))
+        return v
+
+    mine = fly(sc, vehicle(ARDRONE2), Controller(ARDRONE2), TruthEstimator(), seconds=2.0)
+    assert mine.status == ref.status and np.array_equal(mine.state, ref.state) and np.array_equal(mine.pwm, ref.pwm)
+    heavy = replace(ARDRONE2, mass=ARDRONE2.mass * 1.1)
+    other = fly(sc, vehicle(heavy), Controller(ARDRONE2), TruthEstimator(), seconds=2.0)
+    assert not np.array_equal(other.state, ref.state) and other.status != SimStatus.CRASHED
+    with pytest.raises(TypeError, match="Vehicle"):
+        fly(sc, "drone", Controller(ARDRONE2), TruthEstimator())
+    with pytest.raises(ValueError, match="substeps"):
+        fly(sc, vehicle(ARDRONE2), Controller(ARDRONE2), TruthEstimator(), substeps=0)

@@ -31,7 +31,7 @@ from visloc.sim.sensors import BottomCamera, Imu, Ultrasound
 from visloc.sim.vehicle import Vehicle, motor_coefficients
 from visloc.types import FloatArray
 
-__all__ = ["SIM_GRID", "SimResult", "SimStatus", "simulate"]
+__all__ = ["SIM_GRID", "SimResult", "SimStatus", "VisionSensors", "fly", "simulate"]
 
 SIM_GRID = {"rows": 10, "cols": 10, "marker_length": 0.10, "spacing": 0.05}
 """The floor grid of the vision scenarios (DICT_4X4_100), as ``visloc render localize``'s."""
@@ -140,7 +140,9 @@ def simulate(
     localizer: Callable | None = None,
     warmup: float | None = None,
 ) -> SimResult:
-    """Fly ``scenario`` in closed loop on the non-linear model.
+    """Fly ``scenario`` in closed loop on the non-linear model: build the vehicle (motors
+    drawn at ``sigma``), the controller, the sensors and the estimator, hover ``warmup`` s,
+    then :func:`fly` them.
 
     Parameters
     ----------
@@ -215,7 +217,6 @@ def simulate(
     h = _check_rate(dt, "dt")
     ctrl_dt = 1.0 / _check_rate(control_rate, "control_rate")
     substeps = max(1, round(ctrl_dt / h))
-    h = ctrl_dt / substeps
     cam_dt = 1.0 / _check_rate(camera_rate, "camera_rate")
     rng = np.random.default_rng(seed)
     c, d = motor_coefficients(p, sigma, seed=seed)
@@ -224,15 +225,81 @@ def simulate(
     controller = Controller(p, gains=gains, specs=specs)
     lead = (WARMUP_SECONDS if sigma > 0 else 0.0) if warmup is None else check_real(
         warmup, "warmup", nonneg=True)
-    _hover(vehicle, controller, sc.start_setpoint, round(lead / ctrl_dt), ctrl_dt, substeps, h)
-    initial = vehicle.state.copy()
-    sensors, estimator = _estimator(sc, rng, cam_dt, initial, p.g, localizer)
+    _hover(vehicle, controller, sc.start_setpoint, round(lead / ctrl_dt), ctrl_dt, substeps, ctrl_dt / substeps)
+    sensors, estimator = _estimator(sc, rng, cam_dt, vehicle.state.copy(), p.g, localizer)
+    result = fly(sc, vehicle, controller, estimator, sensors=sensors, seconds=duration, control_rate=control_rate,
+                 substeps=substeps, rng=rng, progress=progress)
+    result.motors["sigma"] = float(sigma)
+    return result
+
+
+def fly(scenario: Scenario, vehicle: Vehicle, controller: Controller, estimator: TruthEstimator | VisionEstimator,
+        *, sensors: VisionSensors | None = None, seconds: float | None = None, control_rate: float = 200.0,
+        substeps: int = 5, rng: np.random.Generator | None = None,
+        progress: Callable[[float], None] | None = None) -> SimResult:
+    """Fly a scenario with the objects given: the closed loop of :func:`simulate` without
+    building anything (RotorPy's ``simulate(world, vehicle, controller, ...)`` pattern).
+
+    Each control step: the scenario's force (and gusts), the sensors fed to the estimator
+    (or the true state to a :class:`TruthEstimator`), the controller's motor commands on the
+    estimate and the set point, ``substeps`` RK4 steps of the vehicle; the run stops early on
+    the floor, tipped over, :data:`FAR` from the set point or when the vision is lost.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        Set points, reference, forces, gusts and duration.
+    vehicle : Vehicle
+        The vehicle, in its start state (it is flown: its state changes).
+    controller : Controller
+        The controller (its integrators change).
+    estimator : TruthEstimator or VisionEstimator
+        What the controller flies on.
+    sensors : VisionSensors, optional
+        The vision scenario's sensors feeding ``estimator`` (None: ``estimator`` sees the
+        true state).
+    seconds : float, optional
+        Duration, s (> 0; default the scenario's).
+    control_rate : float
+        Controller / IMU rate, Hz (> 0).
+    substeps : int
+        RK4 steps of the vehicle per control step (>= 1).
+    rng : numpy.random.Generator, optional
+        Source of the gusts (default ``default_rng(0)``).
+    progress : callable, optional
+        Called with the simulated time after each simulated second.
+
+    Returns
+    -------
+    SimResult
+        As :func:`simulate` (``motors`` holds the vehicle's ``c`` and ``d``).
+
+    Raises
+    ------
+    TypeError
+        A wrong type of scenario, vehicle, controller or sensors.
+    ValueError
+        ``seconds`` or ``control_rate`` not finite and > 0, ``substeps`` < 1.
+    """
+    if not isinstance(scenario, Scenario):
+        raise TypeError(f"scenario: expected a Scenario, got {type(scenario).__name__}")
+    if not isinstance(vehicle, Vehicle) or not isinstance(controller, Controller):
+        raise TypeError(f"vehicle, controller: expected a Vehicle and a Controller, got "
+                        f"{type(vehicle).__name__} and {type(controller).__name__}")
+    if sensors is not None and not isinstance(sensors, VisionSensors):
+        raise TypeError(f"sensors: expected VisionSensors or None, got {type(sensors).__name__}")
+    if isinstance(substeps, bool) or int(substeps) != substeps or substeps < 1:
+        raise ValueError(f"substeps must be an integer >= 1, got {substeps!r}")
+    sc, p = scenario, vehicle.params
+    duration = sc.seconds if seconds is None else check_real(seconds, "seconds", positive=True)
+    ctrl_dt = 1.0 / _check_rate(control_rate, "control_rate")
+    h = ctrl_dt / int(substeps)
     n = round(duration / ctrl_dt) + 1
     t_out = np.arange(n) * ctrl_dt
     states, estimates = np.full((n, 12), np.nan), np.full((n, 12), np.nan)
     setpoints, pwms = np.full((n, 4), np.nan), np.full((n, 4), np.nan)
     saturated = np.zeros(n, bool)
-    turbulence = _Turbulence(sc.gust_std, ctrl_dt, rng)
+    turbulence = _Turbulence(sc.gust_std, ctrl_dt, rng if rng is not None else np.random.default_rng(0))
     ended: tuple[SimStatus, str] | None = None
     wall = time.perf_counter()
     k = 0
@@ -256,7 +323,7 @@ def simulate(
             if ended is not None or k == n - 1:
                 break
             try:
-                for _ in range(substeps):
+                for _ in range(int(substeps)):
                     vehicle.step(cmd.pwm, h, force)
             except FloatingPointError as exc:
                 ended = SimStatus.DIVERGED, str(exc)
@@ -277,15 +344,15 @@ def simulate(
     if sc.step is not None and sc.trajectory is None:  # the linear model's answer to the same set-point step
         metrics.update(step_metrics_linear(controller.gains, p, sc, duration))
     status, reason = ended if ended is not None else _ran_out(sc, metrics, duration)
-    motors = {"c": [float(v) for v in c], "d": [float(v) for v in d], "sigma": float(sigma)}
+    motors = {"c": [float(v) for v in vehicle.c], "d": [float(v) for v in vehicle.d]}
     return SimResult(sc.name, status, reason, *records[:5], records[5], metrics, motors)
 
 
 def _estimator(sc: Scenario, rng: np.random.Generator, cam_dt: float, initial: FloatArray, g: float,
-               localizer: Callable | None) -> tuple[_Sensors | None, TruthEstimator | VisionEstimator]:
+               localizer: Callable | None) -> tuple[VisionSensors | None, TruthEstimator | VisionEstimator]:
     """The scenario's sensors (None: the controller sees the true state) and estimator."""
     if sc.estimator == "vision":
-        sensors = _Sensors(rng, cam_dt)
+        sensors = VisionSensors(rng, cam_dt)
         return sensors, VisionEstimator(sensors.camera, initial, g=g, localizer=localizer)
     if sc.estimator == "truth":
         return None, TruthEstimator()
@@ -349,9 +416,18 @@ def _ran_out(sc: Scenario, metrics: dict, duration: float) -> tuple[SimStatus, s
                                  f"point (band {sc.band * 100:.0f} cm)")
 
 
-class _Sensors:
-    """The vision scenario's sensors: the IMU at the control rate, the ultrasound at 25 Hz
-    (report §3.2.1) and the bottom camera over the printed grid at ``cam_dt``."""
+class VisionSensors:
+    """The vision scenarios' sensors: the IMU at the control rate, the ultrasound at 25 Hz
+    (report §3.2.1) and the bottom camera over the printed grid (:data:`SIM_GRID`) every
+    ``cam_dt`` s.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        Source of the sensors' noise.
+    cam_dt : float
+        Seconds between camera frames (> 0).
+    """
 
     def __init__(self, rng: np.random.Generator, cam_dt: float) -> None:
         self.imu = Imu(rng=rng)

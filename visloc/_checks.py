@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 import numbers
 
-__all__ = ["check_real"]
+__all__ = ["all_finite", "check_real"]
 
 
 def check_real(value: object, name: str, *, positive: bool = False, nonneg: bool = False,
@@ -30,9 +30,12 @@ def check_real(value: object, name: str, *, positive: bool = False, nonneg: bool
     ValueError
         It is NaN, infinite (unless allowed) or breaks ``positive`` / ``nonneg``.
     """
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+    if type(value) is float:  # the common case, without the ABC check below
+        v = value
+    elif isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise TypeError(f"{name} must be a real number, got {type(value).__name__}")
-    v = float(value)
+    else:
+        v = float(value)
     if not (math.isfinite(v) or (allow_inf and v == math.inf)):
         raise ValueError(f"{name} must be finite, got {v!r}")
     if positive and v <= 0.0:
@@ -40,3 +43,24 @@ def check_real(value: object, name: str, *, positive: bool = False, nonneg: bool
     if nonneg and v < 0.0:
         raise ValueError(f"{name} must be >= 0, got {v!r}")
     return v
+
+
+def all_finite(arr: object) -> bool:
+    """``bool(np.isfinite(arr).all())`` for a float array, several times faster on the few
+    values of a state or a command (Python's ``math.isfinite`` on each, same answer).
+
+    Parameters
+    ----------
+    arr : ndarray
+        A float array of any shape.
+
+    Returns
+    -------
+    bool
+        No NaN and no infinity in ``arr``.
+    """
+    if arr.size <= 64:  # type: ignore[attr-defined]
+        return all(map(math.isfinite, arr.ravel().tolist()))  # type: ignore[attr-defined]
+    import numpy as np  # (this module itself loads no numpy)
+
+    return bool(np.isfinite(arr).all())

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from visloc._checks import check_real
+from visloc._checks import all_finite, check_real
 from visloc.model.params import ARDrone2Params, check_params
 from visloc.types import FloatArray
 
@@ -47,7 +47,7 @@ def as_array(value: ArrayLike, name: str, shape: tuple[int, ...]) -> FloatArray:
         raise TypeError(f"{name}: expected real numbers, got {type(value).__name__}") from exc
     if arr.shape != shape:
         raise ValueError(f"{name}: expected shape {shape}, got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
+    if not all_finite(arr):
         raise ValueError(f"{name}: expected finite values, got {arr!r}")
     return arr
 

@@ -15,7 +15,7 @@ from numpy.typing import ArrayLike
 
 from visloc.control._checks import as_array, check_params, check_real, resolve_arm
 from visloc.control.design import ControllerGains, ControlSpecs, design_gains
-from visloc.control.linear import hover_input, to_pilot
+from visloc.control.linear import _pilot_state, hover_input
 from visloc.model.params import ARDRONE2, ARDrone2Params
 from visloc.model.propulsion import PwmResult, mixer_matrix, pwm_from_inputs
 from visloc.types import FloatArray
@@ -105,6 +105,7 @@ class Controller:
         self.arm = resolve_arm(self.params, arm)
         self.gamma = mixer_matrix(self.params, arm=self.arm)  # report eq. (2.12), mean c, d
         self.K = self.gains.K(integral=True)
+        self.K.setflags(write=False)  # read-only: _feedback keeps its negation while K is the same array
         tilt = check_real(max_tilt, "max_tilt", positive=True, allow_inf=True)
         self.torque_bound = np.array([self.gains.roll.kp, self.gains.pitch.kp]) * tilt
         self.u0 = hover_input(self.params)  # report §4.2.2: T0 = m g feed-forward
@@ -113,6 +114,8 @@ class Controller:
         self.integral_zone = _zone(integral_zone, "integral_zone")
         self.integral_rate_zone = _zone(integral_rate_zone, "integral_rate_zone")
         self._integral = np.zeros(4)
+        self._neg_k_of: FloatArray | None = None  # the K that _neg_k and _neg_k_setpoint negate
+        self._neg_k = self._neg_k_setpoint = np.zeros((4, 16))
 
     @property
     def integral(self) -> FloatArray:
@@ -141,22 +144,35 @@ class Controller:
         """
         s = as_array(state, "state", (12,))
         sp = as_array(setpoint, "setpoint", (4,))
-        x = to_pilot(s, s[8], origin=sp[:3])  # report eq. (4.1)
+        x = _pilot_state(s, float(s[8]), sp[:3])  # report eq. (4.1) (to_pilot, checked above)
         x[8] = wrap_angle(s[8] - sp[3])
         return x
 
+    def _feedback(self) -> tuple[FloatArray, FloatArray]:
+        """``-K`` and its set-point columns ``-K[:, _POSITION_COLUMNS]``, kept while ``K`` is."""
+        if self._neg_k_of is not self.K:
+            self._neg_k = -self.K
+            self._neg_k_setpoint = -self.K[:, _POSITION_COLUMNS]
+            self._neg_k_of = self.K
+        return self._neg_k, self._neg_k_setpoint
+
     def _inputs(self, x: FloatArray, integral: FloatArray) -> tuple[FloatArray, FloatArray]:
         xa = np.concatenate([x, integral])
-        du = -self.K @ xa  # report eq. (4.5): u = -K x
-        setpoint_part = -self.K[:, _POSITION_COLUMNS] @ xa[_POSITION_COLUMNS]
+        neg_k, neg_k_setpoint = self._feedback()
+        du = neg_k @ xa  # report eq. (4.5): u = -K x
+        setpoint_part = neg_k_setpoint @ xa[_POSITION_COLUMNS]
         attitude_part = du - setpoint_part
-        bounded = np.clip(setpoint_part[1:3], -self.torque_bound, self.torque_bound)  # §4.4
-        clipped = np.zeros(4, bool)
-        clipped[[1, 0]] = bounded != setpoint_part[1:3]  # tau_x moves y, tau_y moves x
-        du[1:3] = attitude_part[1:3] + bounded
-        dt_limited = float(np.clip(du[0], -self.max_thrust_change, self.max_thrust_change))
-        clipped[2] = dt_limited != du[0]
+        # §4.4: bound the set-point part of tau_x, tau_y (np.clip on floats: min(max(v, -b), b))
+        bx, by = self.torque_bound.tolist()
+        sx, sy = float(setpoint_part[1]), float(setpoint_part[2])
+        tx, ty = min(max(sx, -bx), bx), min(max(sy, -by), by)
+        du[1], du[2] = float(attitude_part[1]) + tx, float(attitude_part[2]) + ty
+        limit = self.max_thrust_change
+        thrust = float(du[0])
+        dt_limited = min(max(thrust, -limit), limit)
         du[0] = dt_limited
+        # tau_x moves y, tau_y moves x; the thrust bound freezes z
+        clipped = np.array([ty != sy, tx != sx, dt_limited != thrust, False])
         return self.u0 + du, clipped
 
     def _feed_forward(self, x: FloatArray, psi: float, reference: tuple[ArrayLike, ArrayLike]) -> float:

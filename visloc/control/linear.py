@@ -84,9 +84,17 @@ def to_pilot(state: ArrayLike, psi: float, origin: ArrayLike | None = None) -> F
         ``psi`` not finite; ``state`` not (12,) or ``origin`` not (3,), or a NaN or infinite
         entry in them.
     """
-    rt = yaw_rotation(check_real(psi, "psi")).T
-    out = as_array(state, "state", (12,)).copy()
-    offset = np.zeros(3) if origin is None else as_array(origin, "origin", (3,))
+    heading = check_real(psi, "psi")
+    s = as_array(state, "state", (12,))
+    return _pilot_state(s, heading, None if origin is None else as_array(origin, "origin", (3,)))
+
+
+def _pilot_state(state: FloatArray, psi: float, origin: FloatArray | None = None) -> FloatArray:
+    """:func:`to_pilot` without its argument checks (a float64 (12,) ``state``, a float
+    ``psi``, a float64 (3,) ``origin`` or None), for the controller's every step; a new array."""
+    rt = yaw_rotation(psi).T
+    out = state.copy()
+    offset = np.zeros(3) if origin is None else origin
     out[0:3] = rt @ (out[0:3] - offset)  # report eq. (4.1): xi_P = R_psi^T xi_A - R_psi^T o
     out[3:6] = rt @ out[3:6]
     return out

@@ -59,7 +59,6 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-from filterpy.common import Q_discrete_white_noise
 from filterpy.kalman import KalmanFilter
 from scipy.stats import chi2
 
@@ -76,6 +75,28 @@ def _axis_F(order: int, dt: float) -> FloatArray:
     if order == 2:
         return np.array([[1.0, dt], [0.0, 1.0]])
     return np.array([[1.0, dt, 0.5 * dt * dt], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
+
+
+def _axis_Q(order: int, dt: float) -> FloatArray:
+    """One axis block of filterpy's ``Q_discrete_white_noise(order, dt, var=1)``, the same
+    expressions (so the same floating-point values)."""
+    if order == 2:
+        return np.array([[.25 * dt**4, .5 * dt**3],
+                         [.5 * dt**3, dt**2]])
+    return np.array([[.25 * dt**4, .5 * dt**3, .5 * dt**2],
+                     [.5 * dt**3, dt**2, dt],
+                     [.5 * dt**2, dt, 1.0]])
+
+
+def _block_diag(block: FloatArray, n: int) -> FloatArray:
+    """``n`` copies of the square ``block`` on the diagonal, zeros elsewhere: what
+    ``scipy.linalg.block_diag(*[block] * n)`` gives, faster (and, for the finite non-negative
+    blocks of ``F`` and ``Q`` here, also what ``np.kron(np.eye(n), block)`` gives)."""
+    k = block.shape[0]
+    out = np.zeros((n * k, n * k))
+    for i in range(n):
+        out[i * k:(i + 1) * k, i * k:(i + 1) * k] = block
+    return out
 
 
 class PositionVelocityKF:
@@ -315,9 +336,15 @@ class PositionVelocityKF:
         key = (dt, var)
         cached = self._step_cache.get(key)
         if cached is None:  # a stream at a fixed rate asks for the same step again and again
-            F = np.kron(np.eye(self.dims), _axis_F(self.order, dt))
-            Q = Q_discrete_white_noise(dim=self.order, dt=dt, var=var, block_size=self.dims)
-            B = np.kron(np.eye(self.dims), np.array([[0.5 * dt * dt], [dt]])) if self.order == 2 else None
+            # F = kron(I, F_axis); Q = Q_discrete_white_noise(order, dt, var, block_size=dims),
+            # built directly (the same values: this runs at every step of a jittered stream)
+            F = _block_diag(_axis_F(self.order, dt), self.dims)
+            Q = _block_diag(_axis_Q(self.order, dt), self.dims) * var
+            B = None
+            if self.order == 2:
+                B = np.zeros((self.dim_x, self.dims))
+                B[0::2, :] = np.diag(np.full(self.dims, 0.5 * dt * dt))
+                B[1::2, :] = np.diag(np.full(self.dims, dt))
             for a in (F, Q, B):
                 if a is not None:
                     a.setflags(write=False)
@@ -396,7 +423,9 @@ class PositionVelocityKF:
         cov = as_float_array(R, "R", (self.dims, self.dims))
         if not np.all(np.isfinite(cov)):
             return None
-        if not np.allclose(cov, cov.T, rtol=1e-9, atol=1e-12 * float(np.max(np.abs(cov)))):
+        # np.allclose(cov, cov.T, rtol=1e-9, atol=1e-12 max|cov|) without its overhead (finite here)
+        mag = np.abs(cov)
+        if not np.all(np.abs(cov - cov.T) <= 1e-12 * float(np.max(mag)) + 1e-9 * mag.T):
             raise ValueError(f"R must be symmetric, got {cov.tolist()}")
         try:
             np.linalg.cholesky(cov)

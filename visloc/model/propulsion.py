@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from visloc._checks import all_finite
 from visloc.model.params import ARDrone2Params, check_params
 from visloc.types import FloatArray
 
@@ -36,7 +37,7 @@ def _as_float_array(value: ArrayLike, name: str) -> FloatArray:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError) as exc:
         raise TypeError(f"{name}: expected real numbers, got {type(value).__name__}") from exc
-    if not np.all(np.isfinite(arr)):
+    if not all_finite(arr):
         raise ValueError(f"{name}: expected finite values, got {arr!r}")
     return arr
 
@@ -296,7 +297,7 @@ def pwm_from_inputs(
     except np.linalg.LinAlgError as exc:
         raise ValueError("gamma: the mixer matrix is singular") from exc
     k = params.k
-    raw = np.sqrt(np.clip(s, 0.0, None)) - k  # report eq. (4.6)
+    raw = np.sqrt(np.maximum(s, 0.0)) - k  # report eq. (4.6); a negative Gamma^-1 u gives -k
     pwm = np.clip(raw, 0.0, pwm_max)
     reasons = []
     for i in range(4):

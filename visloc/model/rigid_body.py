@@ -23,6 +23,7 @@ import numbers
 import numpy as np
 from numpy.typing import ArrayLike
 
+from visloc._checks import all_finite
 from visloc.model.params import ARDrone2Params, check_params
 from visloc.types import FloatArray
 
@@ -39,7 +40,7 @@ def _vector(value: ArrayLike, name: str, size: int) -> FloatArray:
         raise TypeError(f"{name}: expected real numbers, got {type(value).__name__}") from exc
     if arr.shape != (size,):
         raise ValueError(f"{name}: expected shape ({size},), got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
+    if not all_finite(arr):
         raise ValueError(f"{name}: expected finite values, got {arr!r}")
     return arr
 
@@ -77,6 +78,14 @@ def rotation_matrix(lam: ArrayLike) -> FloatArray:
     )
 
 
+def _check_pitch(theta: float) -> float:
+    """``cos(theta)``, or ValueError when it is below 1e-9 (the Z-Y-X singularity)."""
+    ct = math.cos(theta)
+    if abs(ct) < 1e-9:
+        raise ValueError(f"lam: pitch theta = {theta!r} rad is at the Z-Y-X singularity")
+    return ct
+
+
 def euler_rate_matrix(lam: ArrayLike) -> FloatArray:
     """``Q(lambda)`` (3, 3) with ``d lambda / dt = Q(lambda) omega`` (report eq. 2.7).
 
@@ -99,9 +108,7 @@ def euler_rate_matrix(lam: ArrayLike) -> FloatArray:
         ``lam`` not (3,) or not finite, or ``cos(theta)`` below 1e-9 (the Z-Y-X singularity).
     """
     phi, theta, _ = _vector(lam, "lam", 3)
-    ct = math.cos(theta)
-    if abs(ct) < 1e-9:
-        raise ValueError(f"lam: pitch theta = {theta!r} rad is at the Z-Y-X singularity")
+    ct = _check_pitch(theta)
     cf, sf, tt = math.cos(phi), math.sin(phi), math.tan(theta)
     return np.array(  # report eq. (2.7)
         [
@@ -154,8 +161,9 @@ def derivatives(
     p = check_params(params)
     if not isinstance(gyroscopic, bool):
         raise TypeError(f"gyroscopic: expected bool, got {type(gyroscopic).__name__}")
-    euler_rate_matrix(s[6:9])  # raises at the Z-Y-X singularity
-    return rhs(s, u, p.mass, p.g, np.array([p.Ixx, p.Iyy, p.Izz]), gyroscopic=gyroscopic)
+    _check_pitch(s[7])  # raises at the Z-Y-X singularity, as euler_rate_matrix(s[6:9]) does
+    return np.array(rhs_values(s.tolist(), u.tolist(), p.mass, p.g, [p.Ixx, p.Iyy, p.Izz],
+                               gyroscopic=gyroscopic))
 
 
 def rhs(state: FloatArray, u: FloatArray, mass: float, g: float, inertia: FloatArray, *,

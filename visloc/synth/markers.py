@@ -221,7 +221,9 @@ def _polygons_of(bits_bytes: bytes, s: int, length: float, margin_cells: float):
 
 def _project_clipped(K: FloatArray, pose: Pose, poly: FloatArray, near: float) -> FloatArray:
     """Project a plane polygon (n, 2), clipped to the half-space ``z >= near``."""
-    pts = pose.apply(np.c_[poly, np.zeros(len(poly))])
+    flat = np.zeros((len(poly), 3))  # the polygon on the plane z = 0
+    flat[:, :2] = poly
+    pts = pose.apply(flat)
     if np.all(pts[:, 2] >= near):
         kept = pts
     else:  # Sutherland-Hodgman against the near plane

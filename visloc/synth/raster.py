@@ -59,7 +59,7 @@ def polygon_edges(
         p = np.asarray(poly, np.float64)
         if p.shape[0] < 3:
             continue
-        q = np.roll(p, -1, axis=0)
+        q = np.concatenate((p[1:], p[:1]))  # np.roll(p, -1, axis=0): the next vertex
         twice_area = float(np.sum(p[:, 0] * q[:, 1] - q[:, 0] * p[:, 1]))
         if twice_area == 0.0:
             continue

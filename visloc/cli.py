@@ -343,6 +343,9 @@ def _add_robust(sub: argparse._SubParsersAction) -> None:
     rb = sub.add_parser("robust", help="robust stability of the hover controller over the propulsion box")
     rb.add_argument("--sigma", type=float, default=3.0, metavar="N",
                     help="box half-width in standard deviations of c and d (default 3)")
+    rb.add_argument("--tilt", type=float, default=0.0, metavar="DEG",
+                    help="the tracking loop's check: also linearised in steady sideways accelerations at +-DEG "
+                         "roll (a trajectory's tilt; 768 matrices, one Lyapunov matrix for all); default 0: hover")
     rb.add_argument("--json", action="store_true", help="print JSON instead of a table")
 
 

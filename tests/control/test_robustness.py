@@ -117,3 +117,24 @@ def test_bad_arguments():
         largest_sigma("eigen")
     with pytest.raises(ValueError, match="matrices"):
         vertex_stability(np.zeros((2, 3)))
+
+
+def test_the_tracking_loop_at_a_trajectory_tilt(gains):
+    # a trajectory holds a tilt (feed-forward) while the feedback acts on the errors from it:
+    # the model linearised in a steady sideways acceleration at 15 degrees roll has thrust
+    # pushing sideways as well as up (sin and cos of the roll over the mass), and every
+    # vertex of the +-2 sigma box is still stable there
+    import math
+
+    from visloc.control import linearize_numerical
+
+    phi = math.radians(15.0)
+    _, b = linearize_numerical(ARDRONE2, roll=phi)
+    assert b[4, 0] == pytest.approx(math.sin(phi) / ARDRONE2.mass, rel=1e-6)
+    assert b[5, 0] == pytest.approx(-math.cos(phi) / ARDRONE2.mass, rel=1e-6)
+    tilted, _ = closed_loop_vertices(2.0, gains=gains, roll=phi)
+    hover, _ = closed_loop_vertices(2.0, gains=gains)
+    assert not np.allclose(tilted, hover)  # another operating point
+    assert vertex_stability(tilted)[0]
+    with pytest.raises(ValueError, match="roll"):
+        linearize_numerical(ARDRONE2, roll=1.3)

@@ -7,10 +7,11 @@ import json
 
 
 def robust(args: argparse.Namespace) -> int:
-    """``visloc robust --sigma N [--json]``: check the closed loop at every vertex of the
-    propulsion-coefficient box of half-width N standard deviations (report section 4.4,
-    eqs. 4.12-4.13) and search for a common Lyapunov matrix; exit status 0 when every vertex
-    is stable, 1 when one is not.
+    """``visloc robust --sigma N [--tilt DEG] [--json]``: check the closed loop at every vertex
+    of the propulsion-coefficient box of half-width N standard deviations (report section 4.4,
+    eqs. 4.12-4.13) and search for a common Lyapunov matrix; with ``--tilt``, the tracking
+    loop's: the vertices also linearised at +-DEG roll; exit status 0 when every vertex is
+    stable, 1 when one is not (2: a bad ``--sigma`` or ``--tilt``).
 
     Parameters
     ----------
@@ -23,13 +24,18 @@ def robust(args: argparse.Namespace) -> int:
         Exit status: 0 when every vertex is stable, 1 when one is not.
     """
     from visloc.control.robustness import robust_summary
+    from visloc.errors import UsageError
 
-    s = robust_summary(args.sigma)
+    try:
+        s = robust_summary(args.sigma, tilt_deg=args.tilt)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
     if args.json:
         print(json.dumps(s, indent=1))
     else:
         verdict = "stable at every vertex" if s["vertex_stable"] else "UNSTABLE at some vertex"
-        print(f"propulsion box +-{s['n_sigma']:g} sigma (eqs. 4.12-4.13): {s['vertices']} vertices, "
+        where = f" at hover and +-{s['tilt_deg']:g} deg roll" if s["tilt_deg"] else ""
+        print(f"propulsion box +-{s['n_sigma']:g} sigma (eqs. 4.12-4.13){where}: {s['vertices']} vertices, "
               f"closed loop ({s['states']} states) {verdict}")
         print(f"largest real part of a closed-loop eigenvalue: {s['max_real_eig']:.4g} 1/s")
         print(f"common Lyapunov matrix (quadratic stability over the polytope): {s['lyapunov']}")

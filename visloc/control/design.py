@@ -30,7 +30,7 @@ import numpy as np
 from scipy.linalg import solve_continuous_are
 
 from visloc.control._checks import check_params, check_real
-from visloc.control.linear import linearize_analytical
+from visloc.control.linear import linearize_analytical, linearize_numerical
 from visloc.model.params import ARDrone2Params
 from visloc.types import FloatArray
 
@@ -336,13 +336,17 @@ def design_gains(params: ARDrone2Params, specs: ControlSpecs | None = None) -> C
     return ControllerGains(**inner, **outer, specs=s)
 
 
-def augmented_model(params: ARDrone2Params) -> tuple[FloatArray, FloatArray]:
+def augmented_model(params: ARDrone2Params, *, roll: float = 0.0) -> tuple[FloatArray, FloatArray]:
     """The pilot-frame linear model at hover with the integrated errors appended (§4.2.3).
 
     Parameters
     ----------
     params : ARDrone2Params
         Vehicle parameters (mass, inertia, g).
+    roll : float
+        0 (hover: :func:`visloc.control.linearize_analytical`), or the roll of a steady
+        sideways acceleration to linearise at instead (rad,
+        :func:`visloc.control.linearize_numerical`): the operating point of a tracking loop.
 
     Returns
     -------
@@ -359,7 +363,7 @@ def augmented_model(params: ARDrone2Params) -> tuple[FloatArray, FloatArray]:
     TypeError
         ``params`` is not an :class:`ARDrone2Params`.
     """
-    a, b = linearize_analytical(params)
+    a, b = linearize_analytical(params) if roll == 0.0 else linearize_numerical(params, roll=roll)
     aa = np.zeros((16, 16))
     aa[:12, :12] = a
     aa[12, 0] = aa[13, 1] = aa[14, 2] = aa[15, 8] = 1.0  # d/dt int e = e, report §4.2.3

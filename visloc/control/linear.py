@@ -158,10 +158,12 @@ def linearize_numerical(
     params: ARDrone2Params,
     *,
     psi0: float = 0.0,
+    roll: float = 0.0,
     step: float = 1e-6,
     gyroscopic: bool = False,
 ) -> tuple[FloatArray, FloatArray]:
-    """Jacobians ``(A, B)`` of the non-linear model at hover, in the pilot frame (eqs. 4.3-4.4).
+    """Jacobians ``(A, B)`` of the non-linear model at hover, in the pilot frame (eqs. 4.3-4.4),
+    or in a steady sideways acceleration at a roll angle.
 
     Central differences of :func:`visloc.model.derivatives` with the state mapped into and out
     of the pilot frame of the (frozen) hover heading ``psi0``.
@@ -173,6 +175,11 @@ def linearize_numerical(
     psi0 : float
         Heading at which to linearise, rad; the result does not depend on it (that is the
         point of the pilot frame).
+    roll : float
+        Roll angle of the operating point, rad (|roll| < 1.2): the attitude in which the
+        drone accelerates sideways at ``g tan(roll)`` holding its height, with the thrust
+        ``m g / cos(roll)`` (a trajectory's tilt, :func:`visloc.control.trajectory.model_limits`);
+        0: hover.
     step : float
         Finite-difference step, in the units of each state / input entry (> 0).
     gyroscopic : bool
@@ -194,10 +201,14 @@ def linearize_numerical(
     """
     p = check_params(params)
     psi0 = check_real(psi0, "psi0")
+    phi0 = check_real(roll, "roll")
+    if abs(phi0) >= 1.2:
+        raise ValueError(f"roll must be below 1.2 rad (69 degrees) in size, got {phi0}")
     h = check_real(step, "step", positive=True)
     x0 = np.zeros(12)
-    x0[8] = psi0
+    x0[6], x0[8] = phi0, psi0
     u0 = hover_input(p)
+    u0[0] /= math.cos(phi0)  # the height held: T cos(roll) = m g
 
     def f(xp: FloatArray, u: FloatArray) -> FloatArray:
         xa = from_pilot(xp, psi0)

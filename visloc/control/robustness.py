@@ -132,6 +132,7 @@ def closed_loop_vertices(
     gains: ControllerGains | None = None,
     arm: float | None = None,
     integral: bool = True,
+    roll: float = 0.0,
 ) -> tuple[FloatArray, FloatArray]:
     """Closed-loop matrices ``A - B(delta) K`` at the 256 vertices (report eqs. 4.14-4.16).
 
@@ -147,6 +148,11 @@ def closed_loop_vertices(
         Arm distance of eq. (2.12), m (see :func:`visloc.control.resolve_arm`).
     integral : bool
         Include the four integral states (16 states) or not (12).
+    roll : float
+        The operating point, rad: 0 hover (the report's check), else the model linearised in
+        a steady sideways acceleration at this roll (:func:`visloc.control.augmented_model`):
+        a tracking loop flying a trajectory's tilt, its feed-forward holding the attitude and
+        the feedback acting on the errors from it.
 
     Returns
     -------
@@ -171,7 +177,7 @@ def closed_loop_vertices(
     g = design_gains(p) if gains is None else gains
     if not isinstance(g, ControllerGains):
         raise TypeError(f"gains: expected ControllerGains, got {type(g).__name__}")
-    a, b = augmented_model(p)
+    a, b = augmented_model(p, roll=check_real(roll, "roll"))
     k = g.K(integral=True)
     size = 16 if integral else 12
     a, b, k = a[:size, :size], b[:size], k[:, :size]
@@ -292,6 +298,7 @@ def vertex_check(
     arm: float | None = None,
     integral: bool = True,
     lyapunov: bool = False,
+    roll: float = 0.0,
 ) -> VertexResult:
     """The report's 2^8 = 256-vertex stability check at ``+- n_sigma`` (eq. 4.16).
 
@@ -299,7 +306,7 @@ def vertex_check(
     ----------
     n_sigma : float
         Box half-width in standard deviations of ``c`` and ``d`` (>= 0).
-    params, gains, arm, integral
+    params, gains, arm, integral, roll
         As for :func:`closed_loop_vertices`.
     lyapunov : bool
         Also run :func:`common_lyapunov` on the vertices.
@@ -316,7 +323,7 @@ def vertex_check(
         As for :func:`closed_loop_vertices`.
     """
     mats, ratios = closed_loop_vertices(n_sigma, params=params, gains=gains, arm=arm,
-                                        integral=integral)
+                                        integral=integral, roll=roll)
     stable, worst_eig, worst = vertex_stability(mats)
     status = common_lyapunov(mats).status if lyapunov else None
     return VertexResult(n_sigma=float(n_sigma), vertices=len(mats), vertex_stable=stable,
@@ -397,7 +404,7 @@ def largest_sigma(
 
 
 def robust_summary(n_sigma: float, *, params: ARDrone2Params = ARDRONE2,
-                   arm: float | None = None) -> dict:
+                   arm: float | None = None, tilt_deg: float = 0.0) -> dict:
     """JSON-ready robustness figures for ``visloc robust --sigma N --json``.
 
     Parameters
@@ -408,14 +415,19 @@ def robust_summary(n_sigma: float, *, params: ARDrone2Params = ARDRONE2,
         Vehicle parameters.
     arm : float, optional
         Arm distance of eq. (2.12), m (see :func:`visloc.control.resolve_arm`).
+    tilt_deg : float
+        0: the report's check at hover. Else the tracking loop's: the vertices at hover and
+        linearised in steady sideways accelerations at +- this roll (degrees, below 45; a
+        trajectory's tilt, :func:`visloc.control.trajectory.model_limits`), 768 matrices,
+        with one Lyapunov matrix common to all of them.
 
     Returns
     -------
     dict
         ``vertices`` (int), ``vertex_stable`` (bool), ``max_real_eig`` (float, 1/s),
         ``lyapunov`` (``"feasible"`` / ``"infeasible"`` / ``"unavailable"``), plus
-        ``n_sigma``, ``arm_m`` and ``states`` (16: the 12 pilot-frame states and 4
-        integrals) for the record.
+        ``n_sigma``, ``tilt_deg``, ``arm_m`` and ``states`` (16: the 12 pilot-frame states
+        and 4 integrals) for the record.
 
     Raises
     ------
@@ -426,10 +438,18 @@ def robust_summary(n_sigma: float, *, params: ARDrone2Params = ARDRONE2,
     """
     p = check_params(params)
     d_arm = resolve_arm(p, arm)
-    r = vertex_check(n_sigma, params=p, arm=d_arm, lyapunov=True)
-    return {"n_sigma": r.n_sigma, "vertices": r.vertices, "vertex_stable": r.vertex_stable,
-            "max_real_eig": r.max_real_eig, "lyapunov": r.lyapunov, "arm_m": d_arm,
-            "states": 16}
+    tilt = check_real(tilt_deg, "tilt_deg", nonneg=True)
+    if tilt >= 45.0:
+        raise ValueError(f"tilt_deg must be below 45 degrees, got {tilt}")
+    if tilt == 0.0:
+        r = vertex_check(n_sigma, params=p, arm=d_arm, lyapunov=True)
+        return {"n_sigma": r.n_sigma, "tilt_deg": 0.0, "vertices": r.vertices, "vertex_stable": r.vertex_stable,
+                "max_real_eig": r.max_real_eig, "lyapunov": r.lyapunov, "arm_m": d_arm, "states": 16}
+    rolls = (0.0, math.radians(tilt), -math.radians(tilt))
+    mats = np.concatenate([closed_loop_vertices(n_sigma, params=p, arm=d_arm, roll=r)[0] for r in rolls])
+    stable, worst_eig, _ = vertex_stability(mats)
+    return {"n_sigma": float(n_sigma), "tilt_deg": tilt, "vertices": len(mats), "vertex_stable": stable,
+            "max_real_eig": worst_eig, "lyapunov": common_lyapunov(mats).status, "arm_m": d_arm, "states": 16}
 
 
 def _as_stack(matrices: FloatArray) -> FloatArray:

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import itertools
+import math
 import os
 import sys
 from dataclasses import replace
@@ -96,6 +97,9 @@ def scenarios(quick: bool) -> list[dict]:
         label = "step 5 m, trajectory + feed-forward" if smooth else "step 5 m, plain set point"
         rows.append(_row(label, simulate(step_scenario(5.0, smooth=smooth))))
         print(rows[-1], file=sys.stderr)
+    # ... and the plain step without the report's torque bound (§4.4): its controller before the fix
+    rows.append(_row("step 5 m, plain set point, torques unbounded", simulate(step_scenario(5.0, smooth=False),
+                                                                               max_tilt=math.inf)))
     # issue 20: the 1.25 m square at 0.5 m/s on visloc's vision, the motors drawn at +-2 sigma
     square = square_scenario(1.25, speed=0.5, vision=True)
     for seed in range(2 if quick else 8):

@@ -360,6 +360,9 @@ def _add_sim(sub: argparse._SubParsersAction) -> None:
     sm.add_argument("--distance", type=_at_most(100, "a side step in a room or a field"), default=5.0, metavar="M",
                     help="the step scenario's distance, m (default 5)")
     sm.add_argument("--plain", action="store_true", help="step: jump the set point as the report does, no trajectory")
+    sm.add_argument("--unbounded", action="store_true",
+                    help="without the report's bound on the set-point torques (section 4.4): the controller before it, "
+                         "which large --plain steps tip over")
     sm.add_argument("--side", type=_at_most(100, "a square in a room or a field"), default=1.25, metavar="M",
                     help="the square scenario's side, m (default 1.25)")
     sm.add_argument("--speed", type=_positive, default=0.5, metavar="M/S", help="the square's speed limit (default 0.5)")

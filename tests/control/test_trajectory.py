@@ -66,6 +66,11 @@ def test_a_5_m_side_step_along_the_trajectory_against_the_plain_set_point_step()
     # the report's set-point step of the same size tilts and dips far more
     assert plain.metrics["height_dip_m"] > 5 * m["height_dip_m"]
     assert plain.metrics["max_tilt_deg"] > 2 * m["max_tilt_deg"]
+    # without the report's bound on the set-point torques (section 4.4) the plain step tips
+    # the drone over, "as the report found" for large side steps; the trajectory needs no bound
+    unbounded = simulate(step_scenario(5.0, smooth=False), max_tilt=math.inf)
+    assert unbounded.status is SimStatus.CRASHED and "tipped over" in unbounded.reason
+    assert simulate(step_scenario(5.0), max_tilt=math.inf).status is SimStatus.SETTLED
     with pytest.raises(ValueError, match="distance"):
         step_scenario(-1.0)
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 
 _ROWS = (
@@ -71,6 +72,7 @@ def sim(args: argparse.Namespace) -> int:
     try:
         result = simulate(scenario, sigma=args.sigma, seed=args.seed, seconds=args.seconds,
                           camera_rate=args.camera_rate, motor_lag=args.motor_lag, warmup=args.warmup,
+                          max_tilt=math.inf if args.unbounded else 0.3,
                           progress=(lambda _t: bar.update(1)) if bar is not None else None)
     finally:
         if bar is not None:

@@ -139,6 +139,7 @@ def simulate(
     progress: Callable[[float], None] | None = None,
     localizer: Callable | None = None,
     warmup: float | None = None,
+    max_tilt: float = 0.3,
 ) -> SimResult:
     """Fly ``scenario`` in closed loop on the non-linear model: build the vehicle (motors
     drawn at ``sigma``), the controller, the sensors and the estimator, hover ``warmup`` s,
@@ -180,6 +181,11 @@ def simulate(
         Seconds of hover on the true state before t = 0, not recorded (the report's take-off
         before its side steps): the integrators absorb the motors' spread first. Default
         :data:`WARMUP_SECONDS` when ``sigma > 0``, else 0.
+    max_tilt : float
+        The controller's bound on the set-point part of the roll and pitch torques, as the
+        tilt it asks for, rad (report §4.4; :class:`visloc.control.Controller`); ``math.inf``:
+        unbounded, the report's controller before that bound (large set-point steps tip it
+        over).
 
     Returns
     -------
@@ -222,7 +228,7 @@ def simulate(
     c, d = motor_coefficients(p, sigma, seed=seed)
     vehicle = Vehicle(p, c=c, d=d, motor_lag=motor_lag, state=_at(sc.start_setpoint))
     vehicle.trim(np.full(4, hover_pwm(p)))
-    controller = Controller(p, gains=gains, specs=specs)
+    controller = Controller(p, gains=gains, specs=specs, max_tilt=max_tilt)
     lead = (WARMUP_SECONDS if sigma > 0 else 0.0) if warmup is None else check_real(
         warmup, "warmup", nonneg=True)
     _hover(vehicle, controller, sc.start_setpoint, round(lead / ctrl_dt), ctrl_dt, substeps, ctrl_dt / substeps)

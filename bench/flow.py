@@ -11,6 +11,8 @@ same way (visloc's ``ground_velocity``), so the comparison is of the image motio
   options={"direct": True})`` fed each flight's frames in order, as ``visloc flow --direct``
   runs (the previous pair's motion steers the block sums, and after a good pair the next is
   tracked by the direct alignment from it alone, the block sums every 30th pair);
+  ``visloc_stream_shadows``: the same with ``"shadows": True`` (``visloc flow --direct
+  --shadows``: each frame divided by its local mean before the alignment);
   ``visloc_cir``: the report's Appendix H solver;
 - ``dis``: ``cv2.DISOpticalFlow`` PRESET_ULTRAFAST dense flow, sampled on a grid,
   + ``cv2.estimateAffinePartial2D`` (RANSAC);
@@ -75,20 +77,24 @@ def make_methods(size: tuple[int, int]) -> dict:
         m = global_motion(f)
         return (refine_motion(a, b, m) if m.inliers >= 3 else m), f
 
-    stream: dict = {"ego": None, "last": None}
     K = np.array([[300.0, 0.0, (w - 1) / 2.0], [0.0, 300.0, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
 
-    def visloc_stream(a, b):
-        # EgoMotion(direct=True) over consecutive pairs: a pair whose first frame is the
-        # previous pair's second continues the stream (tracking from the prior), else a new
-        # stream starts (its first frame's priming counted in this pair's time); the image
-        # motion does not depend on the camera or height given here
-        if stream["last"] is not a:
-            stream["ego"] = EgoMotion(Camera(K, size=size), options={"direct": True})
-            stream["ego"].update(a, dt=1 / 60.0, height=1.0)
-        gv = stream["ego"].update(b, dt=1 / 60.0, height=1.0)
-        stream["last"] = b
-        return gv.motion, stream["ego"].last_field
+    def streamed(options):
+        stream: dict = {"ego": None, "last": None}
+
+        def run(a, b):
+            # EgoMotion(direct=True) over consecutive pairs: a pair whose first frame is the
+            # previous pair's second continues the stream (tracking from the prior), else a new
+            # stream starts (its first frame's priming counted in this pair's time); the image
+            # motion does not depend on the camera or height given here
+            if stream["last"] is not a:
+                stream["ego"] = EgoMotion(Camera(K, size=size), options=options)
+                stream["ego"].update(a, dt=1 / 60.0, height=1.0)
+            gv = stream["ego"].update(b, dt=1 / 60.0, height=1.0)
+            stream["last"] = b
+            return gv.motion, stream["ego"].last_field
+
+        return run
 
     def run_dis(a, b):
         flow = dis.calc(a, b, None)
@@ -111,7 +117,8 @@ def make_methods(size: tuple[int, int]) -> dict:
         (dx, dy), _ = cv2.phaseCorrelate(a.astype(np.float32), b.astype(np.float32))
         return GlobalMotion(np.array([dx, dy]), 0.0, 1.0, None, 0.0, 99, "phase"), None
 
-    return {"visloc": visloc, "visloc_direct": visloc_direct, "visloc_stream": visloc_stream,
+    return {"visloc": visloc, "visloc_direct": visloc_direct, "visloc_stream": streamed({"direct": True}),
+            "visloc_stream_shadows": streamed({"direct": True, "shadows": True}),
             "visloc_cir": lambda a, b: visloc(a, b, "cir"),
             "dis": run_dis, "lk": run_lk, "phase": run_phase}
 

@@ -241,6 +241,9 @@ def _add_flow(sub: argparse._SubParsersAction) -> None:
                     help="global-motion solver (default: similarity; cir = report Appendix H)")
     fl.add_argument("--direct", action="store_true",
                     help="add the sub-pixel stage (direct alignment of the similarity): more accurate, slower")
+    fl.add_argument("--shadows", action="store_true",
+                    help="with --direct: align each frame divided by its local mean, so moving shadows, vignetting "
+                         "and uneven light do not read as motion (about 0.25 ms more per frame at 320x240)")
     fl.add_argument("--out", metavar="FILE.csv", help="write one row per frame")
     fl.add_argument("--rerun", metavar="FILE.rrd", help="write a rerun recording")
     gy = fl.add_mutually_exclusive_group()

@@ -70,6 +70,9 @@ def test_a_5_m_side_step_along_the_trajectory_against_the_plain_set_point_step()
     # the drone over, "as the report found" for large side steps; the trajectory needs no bound
     unbounded = simulate(step_scenario(5.0, smooth=False), max_tilt=math.inf)
     assert unbounded.status is SimStatus.CRASHED and "tipped over" in unbounded.reason
+    assert unbounded.to_dict()["crashed"] and not smooth.to_dict()["crashed"]
+    # the largest distance from the moving reference: the trajectory is tracked within centimetres
+    assert m["max_error_m"] < 0.05 and plain.metrics["max_error_m"] > 4.0
     assert simulate(step_scenario(5.0), max_tilt=math.inf).status is SimStatus.SETTLED
     with pytest.raises(ValueError, match="distance"):
         step_scenario(-1.0)

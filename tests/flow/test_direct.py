@@ -153,3 +153,25 @@ def test_the_grid_is_fine_in_slow_flight_and_coarse_at_flight_speed():
     assert auto_stride((480, 640), motion(0.5)) == 4 and auto_stride((480, 640), motion(5.0)) == 8
     with pytest.raises(ValueError, match="stride"):
         refine_motion(np.zeros((64, 64), np.uint8), np.zeros((64, 64), np.uint8), motion(0.0), stride=0)
+
+
+def test_a_moving_shadow_does_not_read_as_motion_with_shadows_on():
+    # a band of 40 % less light drifting across the ground at 1 px per frame: the global gain
+    # of the alignment cannot follow it, dividing each frame by its local mean can
+    fl = render_flight(0.4, 60.0, size=(320, 240), seed=3, max_speed=1.5, height=(1.0, 1.5), max_yaw_rate=0.5,
+                       noise_sigma=1.0, texture="grass")
+    w = 320
+    errors = {}
+    for shadows in (False, True):
+        ego = EgoMotion(Camera(fl.K, size=(320, 240)), options={"direct": True, "shadows": shadows})
+        err = []
+        for k, frame in enumerate(fl.frames):
+            x = np.arange(w) - (60.0 + 1.0 * k)
+            band = 0.5 * (np.tanh(x / 6.0) - np.tanh((x - w / 3.0) / 6.0))
+            img = np.clip(frame * (1.0 - 0.4 * band[None, :]), 0, 255).astype(np.uint8)
+            gv = ego.update(img, dt=1 / 60.0, height=float(fl.track.position[max(k - 1, 0), 2]))
+            if gv is not None:
+                v = fl.track.pair_v[k]
+                err.append(np.linalg.norm(gv.v - v) / max(np.linalg.norm(v), 0.05))
+        errors[shadows] = float(np.median(err))
+    assert errors[True] < 0.6 * errors[False], errors

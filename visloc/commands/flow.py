@@ -94,6 +94,8 @@ def flow(args: argparse.Namespace) -> int:
     from visloc.flow import EgoMotion
     from visloc.io import CsvWriter
 
+    if args.shadows and not args.direct:
+        raise UsageError("--shadows acts on the sub-pixel stage: give --direct with it")
     camera = Camera.from_file(args.camera)
     heights = _read_heights(args.height_csv) if args.height_csv else None
     gyro_log = imu_input(args, ("t", "gx", "gy", "gz"), "flow")  # body rates in camera axes, rad/s
@@ -135,7 +137,7 @@ def flow(args: argparse.Namespace) -> int:
             if ego is None or ego.frame_shape != frame.image.shape[:2]:
                 if ego is not None:
                     warn("flow", f"{frame.name} has another size than the frame before: the track restarts")
-                ego = EgoMotion(cam, options={"method": args.method, "direct": args.direct})
+                ego = EgoMotion(cam, options={"method": args.method, "direct": args.direct, "shadows": args.shadows})
                 ego.update(frame.image, height=height)
                 last_time = frame.time
                 if out:

@@ -27,7 +27,8 @@ from visloc._compiled import use_compiled
 from visloc.flow.motion import _rotation_centre
 from visloc.types import GlobalMotion
 
-__all__ = ["FAST_SHIFT", "NATIVE_DIRECT", "auto_stride", "blurred", "direct_options", "refine_blurred", "refine_motion"]
+__all__ = ["FAST_SHIFT", "LOCAL_BOX", "NATIVE_DIRECT", "auto_stride", "blurred", "direct_options", "refine_blurred",
+           "refine_motion"]
 
 try:
     from visloc.flow import _direct
@@ -244,7 +245,11 @@ def auto_stride(shape: tuple[int, int], start: GlobalMotion) -> int:
     return max(1, round(min(shape) / (120 if fine else 60)))
 
 
-def blurred(img: NDArray[np.uint8], *, sigma: float = 1.0) -> NDArray[np.float32]:
+#: Box (px) of the local mean a frame is divided by with ``blurred(..., local=True)``
+LOCAL_BOX = 17
+
+
+def blurred(img: NDArray[np.uint8], *, sigma: float = 1.0, local: bool = False) -> NDArray[np.float32]:
     """A frame as the direct alignment reads it.
 
     Parameters
@@ -253,15 +258,23 @@ def blurred(img: NDArray[np.uint8], *, sigma: float = 1.0) -> NDArray[np.float32
         Grey frame.
     sigma : float
         Gaussian blur, px (0: none; the kernel spans 2 sigma either side).
+    local : bool
+        Divide the frame by its local mean (a :data:`LOCAL_BOX` px box, 4 grey levels added
+        against division by dark), times 128: light that varies slowly across the image (a
+        shadow moving over the ground, vignetting, uneven light) then no longer reads as
+        motion. On camera-like 320 x 240 flights with a moving shadow (``bench/flow.py``) the
+        streamed median relative error fell from 0.83 % to 0.34 % (LK 0.65 %), the time per
+        pair rose from 0.41 to 0.65 ms.
 
     Returns
     -------
     ndarray (H, W) float32
     """
-    if sigma <= 0:
-        return img.astype(np.float32)
-    k = 2 * math.ceil(2 * sigma) + 1
-    return cv2.GaussianBlur(img, (k, k), sigma).astype(np.float32)
+    b = img if sigma <= 0 else cv2.GaussianBlur(img, (2 * math.ceil(2 * sigma) + 1,) * 2, sigma)
+    if not local:
+        return b.astype(np.float32)
+    mean = cv2.blur(b, (LOCAL_BOX, LOCAL_BOX)).astype(np.float32)
+    return cv2.divide(b.astype(np.float32), mean + np.float32(4.0), scale=128.0)
 
 
 def _points(first: NDArray[np.float32], stride: int, keep: float) -> tuple[NDArray, ...]:

@@ -246,7 +246,8 @@ class EgoMotion:
     options : dict
         Passed to :func:`block_flow` (``method`` to :func:`global_motion`; ``direct=True`` adds
         the sub-pixel stage :func:`visloc.flow.direct.refine_motion`; ``track=False`` turns
-        tracking off).
+        tracking off; ``shadows=True`` has the sub-pixel stage read each frame divided by its
+        local mean, :func:`visloc.flow.direct.blurred`: moving shadows and uneven light).
 
     With ``direct=True`` the stream tracks: a pair after a good one is aligned from the prior
     alone, without the block sums (its motion's ``method`` ends in ``"+tracked"`` and
@@ -311,12 +312,13 @@ class EgoMotion:
         method = opts.pop("method", "similarity")
         direct = bool(opts.pop("direct", False))
         track = bool(opts.pop("track", True))
+        local = bool(opts.pop("shadows", False))
         prior = _prior(self._last, dt)
         frames = None
         if direct:  # each frame is blurred once: as the second of one pair, the first of the next
             if self._blurred is None or self._blurred.shape != a.shape:
-                self._blurred = blurred(a)
-            frames = (self._blurred, blurred(b))
+                self._blurred = blurred(a, local=local)
+            frames = (self._blurred, blurred(b, local=local))
         gv, lost = self._tracked(frames, prior, method, h, dt, gyro) if direct and track else (None, False)
         if gv is None:
             if prior is not None and not lost:  # the previous pair's motion steers the whole-image match

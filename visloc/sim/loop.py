@@ -112,7 +112,7 @@ class SimResult:
     def to_dict(self) -> dict:
         """JSON-ready summary (no arrays): the fields ``visloc sim --json`` prints."""
         out = {"scenario": self.scenario, "status": self.status.value, "reason": self.reason,
-               "seconds": float(self.t[-1]) if len(self.t) else 0.0}
+               "crashed": self.status is SimStatus.CRASHED, "seconds": float(self.t[-1]) if len(self.t) else 0.0}
         out.update(self.metrics)
         out["motors"] = self.motors
         return out

@@ -122,7 +122,8 @@ def run_metrics(sc: Scenario, t: FloatArray, states: FloatArray, estimates: Floa
     -------
     dict
         ``settling_time_s`` (s, or None), ``overshoot_pct`` (% of the step; None without a
-        step), ``position_rms_m``, ``final_error_m``, ``height_dip_m``, ``estimate_rms_m``
+        step), ``position_rms_m``, ``max_error_m`` (the largest distance from the set point
+        or the moving reference), ``final_error_m``, ``height_dip_m``, ``estimate_rms_m``
         (m), ``max_tilt_deg`` (largest roll or pitch, degrees), ``saturated_fraction`` (0-1)
         and ``realtime_factor`` (simulated over wall-clock seconds; inf when ``wall`` is 0).
     """
@@ -144,6 +145,7 @@ def run_metrics(sc: Scenario, t: FloatArray, states: FloatArray, estimates: Floa
         "settling_time_s": settle,
         "overshoot_pct": overshoot,
         "position_rms_m": float(np.sqrt(np.mean(dist**2))),
+        "max_error_m": float(dist.max()),
         "final_error_m": float(dist[-1]),
         "height_dip_m": max(dip, 0.0),
         "estimate_rms_m": float(np.sqrt(np.mean(np.sum((estimates[:, :3] - states[:, :3]) ** 2, 1)))),

@@ -223,6 +223,12 @@ def test_constructor_errors():
         MarkerDetector("DICT_4X4_50", inverted="yes")
     with pytest.raises(ValueError, match="response"):
         MarkerDetector("DICT_4X4_50", response="log")
+    with pytest.raises(ValueError, match="refine_max_iterations"):
+        MarkerDetector("DICT_4X4_50", refine_max_iterations=0)
+    with pytest.raises(ValueError, match="refine_tolerance"):
+        MarkerDetector("DICT_4X4_50", refine_tolerance=-0.1)
+    with pytest.raises(ValueError, match="small_side"):
+        MarkerDetector("DICT_4X4_50", small_side=float("nan"))
 
 
 def _sheet(ids, border_bits=1, cell=12, invert=False):

@@ -34,6 +34,7 @@ the whole path twice, once per polarity.
 
 from __future__ import annotations
 
+import math
 import os
 import statistics
 from collections.abc import Iterator
@@ -367,6 +368,13 @@ class MarkerDetector:
             raise ValueError("passes, dark_passes: at least one search pass is needed")
         if isinstance(self.params.erode, bool) or not 0 <= self.params.erode <= 5:
             raise ValueError(f"erode must be 0 to 5 px, got {self.params.erode!r}")
+        most = self.params.refine_max_iterations
+        if isinstance(most, bool) or not isinstance(most, (int, np.integer)) or not 1 <= most <= 100:
+            raise ValueError(f"refine_max_iterations must be an integer from 1 to 100, got {most!r}")
+        for key in ("refine_tolerance", "small_side"):
+            value = getattr(self.params, key)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value < math.inf:
+                raise ValueError(f"{key} must be a finite number >= 0, got {value!r}")
         # the lenient first look at a candidate's cells (before stage 6) allows this many white
         # bits: the dictionary's range widened by the correctable errors, and one more
         slack = int(self.dictionary.max_correction * self.params.error_correction_rate) + 1

@@ -312,17 +312,18 @@ static void bend_one(const image *im, double q[8], int64_t r, int force, double 
     memcpy(q, out, sizeof(out));
 }
 
-/* Refine one quad q (4, 2) in place; 1 on success (q is left as given otherwise). `work`
- * holds 4 * count * (7 + 2 r + 1) doubles. */
+/* Refine one quad q (4, 2) in place; 1 on success (q is left as given otherwise; a pass
+ * beyond `iterations` that fails leaves the previous pass's corners). `work` holds
+ * 4 * count * (7 + 2 r + 1) doubles. */
 static int refine_one(const image *im, double q[8], int64_t r, int iterations, int max_iterations, double tol,
                       int64_t count, double end_gap, int force, double *work) {
     const int64_t width = 2 * r + 1, n4 = 4 * count;
     double *p_in = work, *p_out = work + n4, *sorted = work + 2 * n4, *ex = work + 3 * n4, *ey = work + 4 * n4;
     double *wt = work + 5 * n4, *res = work + 6 * n4, *prof = work + 7 * n4;
     double cur[8], last_move = HUGE_VAL;
-    int converging = 1;
+    int converging = 1, it;
     memcpy(cur, q, sizeof(cur));
-    for (int it = 0; it < max_iterations; it++) {
+    for (it = 0; it < max_iterations; it++) {
         double normal[4][2];
         for (int s = 0; s < 4; s++) { /* sample every profile */
             const double *a = cur + 2 * s, *b = cur + 2 * ((s + 1) % 4);
@@ -347,7 +348,7 @@ static int refine_one(const image *im, double q[8], int64_t r, int iterations, i
         double lo = select_rank(sorted, n4, 2 * count);
         memcpy(sorted, p_out, (size_t)n4 * sizeof(double));
         double hi = select_rank(sorted, n4, 2 * count);
-        if (!(to_grey(im->lut, hi) - to_grey(im->lut, lo) >= 4.0)) return 0; /* no contrast (grey levels) */
+        if (!(to_grey(im->lut, hi) - to_grey(im->lut, lo) >= 4.0)) goto failed; /* no contrast (grey levels) */
         int long_sides = longest_side(cur) >= BEND_MIN_SIDE;
         double sd_lo = long_sides ? noise_of(p_in, count, sorted) : 0.0;
         double sd_hi = long_sides ? noise_of(p_out, count, sorted) : 0.0;
@@ -374,7 +375,7 @@ static int refine_one(const image *im, double q[8], int64_t r, int iterations, i
                 px[m] += e * normal[s][0];
                 py[m] += e * normal[s][1];
             }
-            if (n_good < 3) return 0;
+            if (n_good < 3) goto failed;
             tls_line(px, py, w, count, lines[s]);
             if (it >= iterations - 1) { /* drop the outliers of the first fit and fit again */
                 double *l = lines[s], sw = 0, ss = 0;
@@ -396,12 +397,12 @@ static int refine_one(const image *im, double q[8], int64_t r, int iterations, i
                 for (int c = 0; c < 3; c++) lines[s][c] = -lines[s][c];
         }
         double next[8], move = 0;
-        if (!quad_corners((const double(*)[3])lines, next)) return 0;
+        if (!quad_corners((const double(*)[3])lines, next)) goto failed;
         for (int c = 0; c < 8; c++) {
             double d = fabs(next[c] - cur[c]);
             if (!(d <= move)) move = d; /* NaN propagates */
         }
-        if (!(move <= 2.0 * (double)r + 1.0)) return 0;
+        if (!(move <= 2.0 * (double)r + 1.0)) goto failed;
         /* passes beyond `iterations` only while every pass shrank the move (blur); where noise
          * moves the sides about as much each pass, or a side walks off, the last one is kept */
         int shrank = move <= SHRINK * last_move;
@@ -411,6 +412,10 @@ static int refine_one(const image *im, double q[8], int64_t r, int iterations, i
         if (it >= iterations - 1 && (move <= tol || !converging)) break;
         last_move = move;
     }
+    memcpy(q, cur, sizeof(cur));
+    return 1;
+failed: /* the first `iterations` passes must all stand; a later one that fails is not taken */
+    if (it < iterations) return 0;
     memcpy(q, cur, sizeof(cur));
     return 1;
 }

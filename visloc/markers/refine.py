@@ -49,9 +49,9 @@ _LEVELS = np.arange(256, dtype=np.float64)
 _BEND_MIN_SIDE = 40.0  # px: markers with shorter sides keep them straight (as _refine.c)
 _LEVEL_Z = 3.0  # standard errors for a side's own levels (_side_levels, as _refine.c)
 #: passes beyond ``iterations`` go on only while every pass shrank a quad's largest corner
-#: move by this factor (one that did not is not taken): blur wider than the profiles shrinks
-#: the moves by about 0.6-0.7 per pass; noise (dark frames) moves the sides about as much each pass, and a side that walks
-#: along a shadow keeps moving (as _refine.c)
+#: move by this factor (one that did not, or failed, is not taken): blur wider than the
+#: profiles shrinks the moves by about 0.6-0.7 per pass; noise (dark frames) moves the sides
+#: about as much each pass, and a side that walks along a shadow keeps moving (as _refine.c)
 _SHRINK = 0.8
 
 __all__ = ["NATIVE_REFINE", "bend_corners", "edge_offsets", "refine_quads", "sample_edge_profiles"]
@@ -330,11 +330,12 @@ def refine_quads(
         move = np.abs(new - before).max(axis=(1, 2))
         shrank = move <= _SHRINK * last_move[busy]
         take = ok & ((it < iterations) | shrank)  # a later pass that did not shrink the move is not taken
-        ok_all[busy[~ok]] = False
+        if it < iterations:  # the first passes must stand; a later one that fails is not taken
+            ok_all[busy[~ok]] = False
         q[busy[take]] = new[take]
         converging[busy] &= shrank
         last_move[busy] = move
-        busy = busy[take & ~(last & ((move <= tolerance) | ~converging[busy]))]
+        busy = busy[take & ~(last & ((move <= tolerance) | ~converging[busy]))]  # failed: not taken, stop
         if not len(busy):
             break
     q[~ok_all] = q0[~ok_all]

@@ -67,3 +67,33 @@ def test_bottom_camera_pose_round_trip():
     # looking down from 1 m above the map centre; the image's top is the body's front (north)
     np.testing.assert_allclose(T.R @ np.array([1.0, 0, 0]), [0, -1, 0], atol=1e-12)
     np.testing.assert_allclose(-T.R.T @ T.t, camera.centre + [0, 0, 1.0], atol=1e-12)
+
+
+def test_the_warped_view_is_the_ray_traced_one():
+    # the floor plane maps to the image by a homography: one warpPerspective of the texture
+    # level gives the grey levels of the per-pixel rays, and views reaching beyond the
+    # printed floor go back to the rays (their mirror tiling)
+    from visloc.pose.maps import GridMap
+    from visloc.pose.rotations import euler_to_matrix
+    from visloc.sim.sensors import BottomCamera
+    from visloc.synth.flight import _render
+    from visloc.synth.floor import _warped
+
+    cam = BottomCamera(GridMap(3, 3, 0.1, 0.05), "DICT_4X4_50", rng=np.random.default_rng(0))
+    floor, rng, warped = cam.floor, np.random.default_rng(1), 0
+    for _ in range(8):
+        state = np.zeros(12)
+        state[:3] = [*rng.uniform(-0.05, 0.05, 2), -rng.uniform(0.3, 0.5)]
+        pose = cam.pose(state, euler_to_matrix(rng.uniform(-0.1, 0.1, 3)))
+        R, C = pose.R.T, -pose.R.T @ pose.t
+        C[:2] -= floor.origin
+        ray = _render(floor.levels, cam.K, cam.size, R, C, floor.metres_per_texel, 2)
+        fast = _warped(floor.levels, cam.K, cam.size, R, C, floor.metres_per_texel, 2)
+        if fast is not None:
+            warped += 1
+            assert np.abs(fast - ray).max() < 0.1
+    assert warped >= 4
+    far = cam.pose(np.r_[5.0, 5.0, -0.4, np.zeros(9)], np.eye(3))  # over the floor's mirror tiling
+    R, C = far.R.T, -far.R.T @ far.t
+    C[:2] -= floor.origin
+    assert _warped(floor.levels, cam.K, cam.size, R, C, floor.metres_per_texel, 2) is None

@@ -367,9 +367,11 @@ def _check_pose(pose: object) -> tuple[FloatArray, FloatArray]:
     return R, C
 
 
-def _render(levels: tuple[NDArray[np.float32], ...], K: FloatArray, size: tuple[int, int],
-            R: FloatArray, C: FloatArray, mpt: float, s: int) -> NDArray[np.float32]:
-    """The noiseless ground view, float32 (H, W); arguments already checked."""
+def _texture_level(levels: tuple[NDArray[np.float32], ...], K: FloatArray, size: tuple[int, int],
+                   R: FloatArray, C: FloatArray, mpt: float) -> tuple[NDArray[np.float32], float]:
+    """The texture level a view samples (a pixel spans at most 1.5 of its texels at the
+    principal point) and its scale ``2^level``; ``ValueError`` when part of the view misses
+    the ground."""
     w, h = size
     k_inv = np.linalg.inv(K)
     corners = k_inv @ np.array([[-0.5, w - 0.5, -0.5, w - 0.5], [-0.5, -0.5, h - 0.5, h - 0.5],
@@ -379,7 +381,14 @@ def _render(levels: tuple[NDArray[np.float32], ...], K: FloatArray, size: tuple[
     depth = -C[2] / float(R[2] @ k_inv @ np.array([K[0, 2], K[1, 2], 1.0]))
     texels = depth / (np.sqrt(K[0, 0] * K[1, 1]) * mpt)  # texels per pixel at the centre
     level = min(int(np.ceil(np.log2(max(texels / 1.5, 1.0)))), len(levels) - 1)
-    tex, scale = levels[level], 2.0**level
+    return levels[level], 2.0**level
+
+
+def _render(levels: tuple[NDArray[np.float32], ...], K: FloatArray, size: tuple[int, int],
+            R: FloatArray, C: FloatArray, mpt: float, s: int) -> NDArray[np.float32]:
+    """The noiseless ground view, float32 (H, W); arguments already checked."""
+    w, h = size
+    tex, scale = _texture_level(levels, K, size, R, C, mpt)
     d = R.astype(np.float32) @ _rays(np.asarray(K, np.float64).tobytes(), w, h, s)
     lam = np.float32(-C[2] / (mpt * scale)) / d[2]  # ray length to the ground, in texels
     maps = []

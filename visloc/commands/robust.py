@@ -28,8 +28,8 @@ def robust(args: argparse.Namespace) -> int:
 
     try:
         s = robust_summary(args.sigma, tilt_deg=args.tilt)
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
+    except ValueError as exc:  # --tilt by its command-line name
+        raise UsageError(str(exc).replace("tilt_deg", "--tilt")) from None
     if args.json:
         print(json.dumps(s, indent=1))
     else:

@@ -191,6 +191,8 @@ def test_robust_json_reports_a_stable_polytope_and_rejects_a_sigma_beyond_the_bo
         assert s["lyapunov"] == "unavailable"
     assert main(["robust", "--sigma", "99"]) == 2
     assert "n_sigma" in capsys.readouterr().err
+    assert main(["robust", "--tilt", "50"]) == 2  # the tracking loop's check: below 45 degrees
+    assert "--tilt" in capsys.readouterr().err
 
 
 def test_border_bits_inverted_and_confidence_from_the_command_line(tmp_path):

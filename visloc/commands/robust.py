@@ -26,10 +26,9 @@ def robust(args: argparse.Namespace) -> int:
     from visloc.control.robustness import robust_summary
     from visloc.errors import UsageError
 
-    try:
-        s = robust_summary(args.sigma, tilt_deg=args.tilt)
-    except ValueError as exc:  # --tilt by its command-line name
-        raise UsageError(str(exc).replace("tilt_deg", "--tilt")) from None
+    if not 0.0 <= args.tilt < 45.0:  # NaN too
+        raise UsageError(f"--tilt must be from 0 to below 45 degrees, got {args.tilt:g}")
+    s = robust_summary(args.sigma, tilt_deg=args.tilt)
     if args.json:
         print(json.dumps(s, indent=1))
     else:

@@ -441,11 +441,7 @@ def robust_summary(n_sigma: float, *, params: ARDrone2Params = ARDRONE2,
     tilt = check_real(tilt_deg, "tilt_deg", nonneg=True)
     if tilt >= 45.0:
         raise ValueError(f"tilt_deg must be below 45 degrees, got {tilt}")
-    if tilt == 0.0:
-        r = vertex_check(n_sigma, params=p, arm=d_arm, lyapunov=True)
-        return {"n_sigma": r.n_sigma, "tilt_deg": 0.0, "vertices": r.vertices, "vertex_stable": r.vertex_stable,
-                "max_real_eig": r.max_real_eig, "lyapunov": r.lyapunov, "arm_m": d_arm, "states": 16}
-    rolls = (0.0, math.radians(tilt), -math.radians(tilt))
+    rolls = (0.0,) if tilt == 0.0 else (0.0, math.radians(tilt), -math.radians(tilt))
     mats = np.concatenate([closed_loop_vertices(n_sigma, params=p, arm=d_arm, roll=r)[0] for r in rolls])
     stable, worst_eig, _ = vertex_stability(mats)
     return {"n_sigma": float(n_sigma), "tilt_deg": tilt, "vertices": len(mats), "vertex_stable": stable,

@@ -168,9 +168,7 @@ def square_scenario(side: float = 1.25, *, speed: float = 0.5, vision: bool = Fa
     h, z = 0.5 * s, -HOVER_HEIGHT
     corners = [[0.0, 0.0, z], [-h, -h, z], [h, -h, z], [h, h, z], [-h, h, z], [-h, -h, z], [0.0, 0.0, z]]
     traj = MinJerkTrajectory(corners, limits or model_limits(speed=speed), start=start)
-    return Scenario("square", f"a {s:g} m square at up to {speed:g} m/s along minimum-jerk segments"
-                              + (" on visloc's vision" if vision else ""), traj.end + 2.0,
-                    estimator="vision" if vision else "truth", gust_std=0.05 if vision else 0.0, trajectory=traj)
+    return _tracking("square", f"a {s:g} m square at up to {speed:g} m/s along minimum-jerk segments", traj, vision)
 
 
 def figure8_scenario(width: float = 1.2, *, speed: float = 0.5, vision: bool = False, start: float = 1.0,
@@ -194,8 +192,13 @@ def figure8_scenario(width: float = 1.2, *, speed: float = 0.5, vision: bool = F
     if not (0.0 < w < 100.0):
         raise ValueError(f"width must be in (0, 100) m, got {width!r}")
     traj = Figure8Trajectory([0.0, 0.0, -HOVER_HEIGHT], w, limits or model_limits(speed=speed), start=start)
-    return Scenario("figure8", f"a {w:g} m figure eight at up to {speed:g} m/s"
-                               + (" on visloc's vision" if vision else ""), traj.end + 2.0,
+    return _tracking("figure8", f"a {w:g} m figure eight at up to {speed:g} m/s", traj, vision)
+
+
+def _tracking(name: str, description: str, traj: MinJerkTrajectory | Figure8Trajectory, vision: bool) -> Scenario:
+    """A scenario flying ``traj`` to its end and 2 s more, on the true state or (``vision``)
+    on visloc's marker-grid vision with light turbulence."""
+    return Scenario(name, description + (" on visloc's vision" if vision else ""), traj.end + 2.0,
                     estimator="vision" if vision else "truth", gust_std=0.05 if vision else 0.0, trajectory=traj)
 
 

@@ -78,7 +78,8 @@ def write_csv(result: SimResult, path: str | os.PathLike[str]) -> Path:
 
 def save_plot(result: SimResult, path: str | os.PathLike[str]) -> Path:
     """PNG of position (true, estimated, set point), attitude and motor commands against time
-    (like report Figures 4.5-4.6). Needs matplotlib (``pip install visloc[plot]``).
+    (like report Figures 4.5-4.6) beside the path seen from above (reference, true,
+    estimated). Needs matplotlib (``pip install visloc[plot]``).
 
     Parameters
     ----------
@@ -106,7 +107,11 @@ def save_plot(result: SimResult, path: str | os.PathLike[str]) -> Path:
     except ImportError as exc:  # pragma: no cover - matplotlib comes with filterpy
         raise ImportError("save_plot needs matplotlib: pip install visloc[plot]") from exc
     t = result.t
-    fig, ax = plt.subplots(3, 1, figsize=(8, 8), sharex=True)
+    fig = plt.figure(figsize=(12, 8))
+    grid = fig.add_gridspec(3, 2, width_ratios=(1.6, 1.0))
+    ax = [fig.add_subplot(grid[0, 0])]
+    ax += [fig.add_subplot(grid[i, 0], sharex=ax[0]) for i in (1, 2)]
+    _path_panel(fig.add_subplot(grid[:, 1]), result)
     curves = _positions_up(result)
     for (label, true, est, sp), colour in zip(curves, ("C0", "C1", "C2"), strict=True):
         ax[0].plot(t, true, colour, label=f"{label} true")
@@ -128,6 +133,22 @@ def save_plot(result: SimResult, path: str | os.PathLike[str]) -> Path:
     fig.savefig(out, dpi=110)
     plt.close(fig)
     return out
+
+
+def _path_panel(ax, result: SimResult) -> None:
+    """The flown path seen from above (north up, east right): reference, true and estimated
+    positions, and where the run started and ended."""
+    north, east = result.state[:, 0], result.state[:, 1]
+    ax.plot(result.setpoint[:, 1], result.setpoint[:, 0], "k:", lw=1.0, label="reference")
+    ax.plot(east, north, "C0", lw=1.0, label="true")
+    ax.plot(result.estimate[:, 1], result.estimate[:, 0], "C1", ls="--", lw=0.8, label="estimate")
+    ax.plot(east[:1], north[:1], "C0o", ms=4, label="start")
+    ax.plot(east[-1:], north[-1:], "C0s", ms=4, label="end")
+    ax.set_xlabel("east, m")
+    ax.set_ylabel("north, m")
+    ax.set_title("path from above", fontsize=9)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.legend(fontsize=7)
 
 
 def save_rerun(result: SimResult, path: str | os.PathLike[str]) -> Path:

@@ -172,7 +172,9 @@ def run(size, n_flights, seconds, rounds, seed0, camera=None, exposure_step=Fals
         tr = fl.track
         frames = _frames(fl, camera, exposure_step, seed0 + i, shadow)
         for k in range(1, len(tr)):
-            pairs.append((frames[k - 1], frames[k], cam, float(tr.position[k - 1, 2]),
+            # the height when the second frame was taken, as ground_velocity takes it (and
+            # visloc flow reads it: the newest frame's)
+            pairs.append((frames[k - 1], frames[k], cam, float(tr.position[k, 2]),
                           tr.pair_v[k], float(tr.pair_yaw_rate[k])))
     times = {m: [] for m in methods}
     results = {m: [None] * len(pairs) for m in methods}

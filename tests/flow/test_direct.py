@@ -20,7 +20,7 @@ def _errors(fl, cam, **kw):
     tr = fl.track
     errs = []
     for k in range(1, len(tr)):
-        gv = estimate_ground_velocity(fl.frames[k - 1], fl.frames[k], cam, float(tr.position[k - 1, 2]), 1 / 60, **kw)
+        gv = estimate_ground_velocity(fl.frames[k - 1], fl.frames[k], cam, float(tr.position[k, 2]), 1 / 60, **kw)
         errs.append(np.linalg.norm(gv.v - tr.pair_v[k]) / max(np.linalg.norm(tr.pair_v[k]), 0.05))
     return np.array(errs)
 
@@ -89,13 +89,13 @@ def test_a_prior_frees_the_stream_from_a_neighbouring_period():
     cam, tr = Camera(fl.K, size=(320, 240)), fl.track
     k = 120
     a, b = fl.frames[k - 1], fl.frames[k]
-    alone = estimate_ground_velocity(a, b, cam, float(tr.position[k - 1, 2]), 1 / 60, direct=True)
+    alone = estimate_ground_velocity(a, b, cam, float(tr.position[k, 2]), 1 / 60, direct=True)
     assert np.linalg.norm(alone.v - tr.pair_v[k]) > 1.0  # the aliased solution
     for direct in (False, True):
         ego = EgoMotion(cam, options={"direct": direct})
         errs = []
         for j in range(95, 131):
-            gv = ego.update(fl.frames[j], dt=1 / 60, height=float(tr.position[j - 1, 2]))
+            gv = ego.update(fl.frames[j], dt=1 / 60, height=float(tr.position[j, 2]))
             if gv is not None:
                 errs.append(np.linalg.norm(gv.v - tr.pair_v[j]) / np.linalg.norm(tr.pair_v[j]))
                 if j == k - 1:
@@ -117,7 +117,7 @@ def test_the_stream_tracks_between_block_sum_pairs(flight, monkeypatch):
     out = {}
     for track in (True, False):
         ego = EgoMotion(cam, options={"direct": True, "track": track})
-        out[track] = [ego.update(f, dt=1 / 60, height=float(tr.position[max(j - 1, 0), 2]))
+        out[track] = [ego.update(f, dt=1 / 60, height=float(tr.position[j, 2]))
                       for j, f in enumerate(fl.frames)][1:]
     kinds = ["tracked" if gv.motion.method.endswith("+tracked") else "block" for gv in out[True]]
     assert kinds[0] == "block" and all(k == "block" for k in kinds[::10])  # re-anchored every 10th pair
@@ -169,7 +169,7 @@ def test_a_moving_shadow_does_not_read_as_motion_with_shadows_on():
             x = np.arange(w) - (60.0 + 1.0 * k)
             band = 0.5 * (np.tanh(x / 6.0) - np.tanh((x - w / 3.0) / 6.0))
             img = np.clip(frame * (1.0 - 0.4 * band[None, :]), 0, 255).astype(np.uint8)
-            gv = ego.update(img, dt=1 / 60.0, height=float(fl.track.position[max(k - 1, 0), 2]))
+            gv = ego.update(img, dt=1 / 60.0, height=float(fl.track.position[k, 2]))
             if gv is not None:
                 v = fl.track.pair_v[k]
                 err.append(np.linalg.norm(gv.v - v) / max(np.linalg.norm(v), 0.05))

@@ -93,7 +93,7 @@ def _demo_flow(out: Path) -> bool:
     errs = []
     with CsvWriter(out / "flow.csv", ["frame", "vx", "vy", "true_vx", "true_vy", "yaw_rate", "true_yaw_rate", "quality"]) as csv:
         for k, img in enumerate(flight.frames):
-            gv = ego.update(img, height=float(tr.position[max(k - 1, 0), 2]))
+            gv = ego.update(img, height=float(tr.position[k, 2]))
             if gv is None:
                 continue
             errs.append(np.linalg.norm(gv.v - tr.pair_v[k]) / max(np.linalg.norm(tr.pair_v[k]), 0.05))

@@ -10,7 +10,11 @@ turns camera +x toward camera +y; the content then turns the other way.
 
 Pinhole model over flat ground at distance ``height`` along the optical axis: a ground
 displacement ``D`` (m) moves the content at the principal point by ``-f D / height`` px
-(report eq. H.7). Roll and pitch rotations also move the content (by ``f`` times the angle,
+(report eq. H.7), ``height`` being the distance when the *second* frame of the pair was taken
+(the content's motion is seen at that depth: a camera at ``h1`` that rises to ``h2`` while it
+moves by ``D`` shifts the centre by ``-f D / h2``). Streaming, that is the height read with the
+newest frame; the height at the first frame reads a climb of 1 % per frame as a velocity 1 %
+too low. Roll and pitch rotations also move the content (by ``f`` times the angle,
 whatever the height); with gyro rates they are subtracted first, as PX4 subtracts body rates
 from flow rates.
 """
@@ -60,7 +64,8 @@ def ground_velocity(
     camera : Camera
         Intrinsics of the frames (distortion is ignored near the principal point).
     height : float
-        Distance from the camera to the ground along the optical axis, m (> 0).
+        Distance from the camera to the ground along the optical axis when the second frame
+        was taken, m (> 0; module docstring).
     dt : float
         Time between the frames, s (> 0).
     gyro : array_like (3,), optional
@@ -145,7 +150,7 @@ def estimate_ground_velocity(
     camera : Camera
         Its intrinsics.
     height : float
-        Height above the ground, m (> 0).
+        Height above the ground when ``curr`` was taken, m (> 0; module docstring).
     dt : float
         Time between the frames, s (> 0).
     gyro : array_like (3,), optional
@@ -287,6 +292,8 @@ class EgoMotion:
         gyro: NDArray | None = None,
     ) -> GroundVelocity | None:
         """Add a frame; returns the velocity since the previous frame (None for the first).
+
+        ``height`` is the height when ``image`` was taken (module docstring).
 
         Raises ValueError for a frame of another size than the previous one, a missing or
         non-positive ``dt`` (when no ``fps`` was set) or height.

@@ -85,6 +85,35 @@ def test_corners_on_renders_beat_opencv(case):
     assert rms < 0.5 * np.sqrt(np.mean(np.square(theirs)))
 
 
+def test_each_corner_on_both_squares_lines_beats_the_squares_own_corners(monkeypatch):
+    # camera-like views, the board whole and running off the image's right edge (squares cut
+    # by it lend what they show): the board's lines fitted across both black squares at each
+    # corner against the mean of the two squares' own corners
+    from visloc.boards import charuco
+
+    views = []
+    for seed in range(3):
+        for shift in (0.0, 0.12):
+            rng = np.random.default_rng(seed)
+            R = Rotation.from_euler("xyz", rng.uniform(-0.5, 0.5, 3)).as_matrix()
+            t = np.array([rng.uniform(-0.04, 0.04) + shift, rng.uniform(-0.03, 0.03), rng.uniform(0.35, 0.5)])
+            views.append(render_charuco(default_camera((640, 480)), (640, 480), Pose(R, t - R @ (0.14, 0.1, 0)),
+                                        BOARD, camera=CameraEffects(), rng=seed))
+    assert any(not v.visible.all() for v in views)
+
+    def rms():
+        errors = []
+        for v in views:
+            got = detect_charuco(v.image, BOARD)
+            assert len(got) == int(v.visible.sum())
+            errors.extend(np.linalg.norm(got.corners - v.corners[got.ids], axis=1))
+        return float(np.sqrt(np.mean(np.square(errors))))
+
+    joint = rms()
+    monkeypatch.setattr(charuco, "_joint_corners", lambda *a, **k: (np.zeros(0, np.int64), np.zeros((0, 2))))
+    assert joint < 0.7 * rms()  # 0.019 against 0.033 px here
+
+
 @pytest.mark.parametrize("name", ["choriginal.jpg", "chocclusion_original.jpg"])
 def test_tutorial_photos_match_opencvs_corners(name):
     img = cv2.imread(str(REAL / name), cv2.IMREAD_GRAYSCALE)

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import render_square
-from visloc.markers.refine import NATIVE_REFINE, edge_offsets, refine_quads, sample_edge_profiles
+from visloc.markers.refine import NATIVE_REFINE, edge_offsets, edge_points, refine_quads, sample_edge_profiles
 from visloc.synth.camera import srgb_encode
 
 ENGINES = [False, True] if NATIVE_REFINE else [False]  # numpy, and the compiled one when built
@@ -25,6 +25,19 @@ def test_sample_edge_profiles_shapes_and_outward_normals():
     assert base.shape == (1, 4, 10, 2) and normals.shape == (1, 4, 2) and prof.shape == (1, 4, 10, 5)
     assert np.allclose(normals[0], [[0, -1], [1, 0], [0, 1], [-1, 0]])
     assert (prof[..., 0] < prof[..., -1]).all()  # dark inside, bright outside
+
+
+def test_edge_points_lie_on_the_sides_of_a_blurred_square():
+    truth = np.array([[30.3, 28.6], [71.2, 31.1], [69.4, 72.5], [28.8, 69.7]])
+    img = render_square((100, 100), truth, blur=1.0)
+    start = truth + [[0.3, -0.2], [-0.25, 0.3], [0.2, 0.2], [-0.3, -0.1]]  # a quad off by 0.4 px
+    pts, normals, offsets, good = edge_points(img, start, radius=4, count=20, response="linear")
+    assert pts.shape == (1, 4, 20, 2) and offsets.shape == good.shape == (1, 4, 20) and good.all()
+    for s in range(4):
+        a, b = truth[s], truth[(s + 1) % 4]
+        n = np.array([b[1] - a[1], a[0] - b[0]]) / np.linalg.norm(b - a)
+        assert np.abs((pts[0, s] - a) @ n).max() < 0.03  # on the true side
+        assert np.abs(offsets[0, s]).max() > 0.05  # found off the quad given
 
 
 @pytest.mark.parametrize("native", ENGINES)

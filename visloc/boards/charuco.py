@@ -14,9 +14,11 @@ OpenCV's pre-4.6 pattern for boards with an even number of rows).
 
 :func:`detect_charuco` finds a board's corners in an image: visloc's marker detector finds the
 markers; each chessboard corner is predicted by the homography of the markers in the two white
-squares that touch it (one suffices); then :func:`refine_saddles` moves it to the saddle point of
-a quadratic fitted to the grey levels around it, read through the camera's response (sRGB by
-default, as the marker detector's stage 8), where a black-white corner's light is symmetric.
+squares that touch it (one suffices); then the black squares' edges are located in linear light
+(the grey levels read through the camera's response, sRGB by default, as the marker detector's
+stage 8 reads them) and each corner is where the board's two lines through it cross, each line
+fitted to the edges of both black squares that meet there (``method="edges"``, the default), or
+the saddle point of a quadratic fitted to the light around it (:func:`refine_saddles`).
 """
 
 from __future__ import annotations
@@ -33,7 +35,7 @@ from visloc._storage import open_storage
 from visloc.markers.binarize import to_gray
 from visloc.markers.detector import MarkerDetector
 from visloc.markers.dictionary import load_dictionary
-from visloc.markers.refine import refine_quads
+from visloc.markers.refine import edge_points, refine_quads
 from visloc.markers.response import response_lut
 
 __all__ = ["CharucoBoard", "CharucoCorners", "detect_charuco", "refine_saddles"]
@@ -305,7 +307,8 @@ def detect_charuco(image: NDArray, board: CharucoBoard, *, detector: MarkerDetec
         Refine the predicted corners (False: the homography predictions).
     method : {"edges", "saddle"}
         ``"edges"``: each black square's edges fitted as the marker detector's stage 8 fits a
-        marker's (the corner the mean of the two squares' that meet there); ``"saddle"``:
+        marker's, then each corner where the board's two lines through it, fitted to the
+        edges of both squares that meet there, cross; ``"saddle"``:
         :func:`refine_saddles`.
 
     Returns
@@ -344,13 +347,16 @@ def detect_charuco(image: NDArray, board: CharucoBoard, *, detector: MarkerDetec
 
 def _refine_by_squares(gray: NDArray[np.uint8], board: CharucoBoard, found: dict[int, FloatArray],
                        ids: NDArray[np.int64], response: str | float) -> tuple[FloatArray, NDArray[np.bool_]]:
-    """Corners ``ids`` as the mean of the refined corners of the black squares that have them:
-    each black square next to a found marker is predicted by those markers' homographies and
-    refined by the marker detector's stages 8 and 8b (:func:`visloc.markers.refine.refine_quads`:
-    its four edges fitted to the light across them, curved under lens distortion, the corners
-    where they meet; each side read by its own black and white levels along it: the light
-    varies across a square of 100 px), with profiles half as wide as the white margin between
-    the square and the markers beside it. Squares not wholly inside the image are left out."""
+    """Corners ``ids`` where the edges of the black squares meet. Each black square next to a
+    found marker is predicted by those markers' homographies and refined by the marker
+    detector's stage 8 (:func:`visloc.markers.refine.refine_quads`: its four edges fitted to
+    the light across them, the corners where they meet; each side read by its own black and
+    white levels along it: the light varies across a square of 100 px), with profiles half as
+    wide as the white margin between the square and the markers beside it; squares not wholly
+    inside the image are not refined. Then each corner where two squares meet is where the
+    board's two lines through it cross, each fitted to both squares' edges
+    (:func:`_joint_corners`); a corner without (its lines did not cross near the squares') is
+    the mean of its refined squares' corners."""
     plane, corner_ids, near = board.black_squares
     H, have = _marker_homographies(board, found)
     predicted, ok = _mean_prediction(H, have, _padded(near), plane)  # the markers' predictions, averaged
@@ -368,17 +374,137 @@ def _refine_by_squares(gray: NDArray[np.uint8], board: CharucoBoard, found: dict
         lo = radius[:, None] + 2.0  # every profile inside the image: squares cut by its edge are left out
         inside = ((quads_arr[..., 0] >= lo) & (quads_arr[..., 0] <= w - 1 - lo) & (quads_arr[..., 1] >= lo)
                   & (quads_arr[..., 1] <= h - 1 - lo)).all(axis=1)
-        refined, ok = refine_quads(gray, quads_arr, radius=radius, response=response, bend=True, levels="side")
+        refined, ok = refine_quads(gray, quads_arr, radius=radius, response=response, bend=False, levels="side")
         ok &= inside
         for k in np.flatnonzero(ok).tolist():
             for i, cid in enumerate(corner_ids[rows[k]].tolist()):
                 if cid >= 0:
                     sums[cid] += refined[k, i]
                     counts[cid] += 1
+        if ok.any():
+            squares = np.where(ok[:, None, None], refined, quads_arr)  # the others as predicted
+            cids, joint = _joint_corners(gray, squares, ok, corner_ids[np.array(rows)], radius, response)
+            sums[cids], counts[cids] = joint, 1.0
     have = counts[ids] > 0
     out = np.full((len(ids), 2), np.nan)
     out[have] = sums[ids[have]] / counts[ids[have], None]
     return out, have
+
+
+#: per corner of a black square (TL, TR, BR, BL on the board), its side along the board's x
+#: and along its y (side s runs from corner s to corner s + 1: top, right, bottom, left)
+_ALONG_X = np.array([0, 0, 2, 2])
+_ALONG_Y = np.array([3, 1, 1, 3])
+#: widest profile of the joint fit, px: its sides start from refined squares, and a narrower
+#: window sums less noise (corner RMS on camera-like 1280 x 720 views: 0.0176 px with the
+#: squares' own half-widths of up to 8 px, 0.0161 with 4, 0.0155 with 3, 0.029 with 2)
+_JOINT_RADIUS = 4
+#: profiles per side of the joint fit: about one per pixel of a side (more lowered the corner
+#: error on camera-like 1280 x 720 views until they were a pixel apart), within these bounds
+_JOINT_COUNT = (16, 128)
+_JOINT_GAP = 0.08  # fraction of each side left out at both ends
+
+
+def _joint_corners(gray: NDArray[np.uint8], quads: FloatArray, refined: NDArray[np.bool_],
+                   corner_ids: NDArray[np.int64], radius: NDArray,
+                   response: str | float) -> tuple[NDArray[np.int64], FloatArray]:
+    """The chessboard corners where two black squares (K, 4, 2) meet, each where two lines
+    cross: along the board's x, the edge of one square that ends at the corner and the edge of
+    the other that starts there (one straight line on the board), and the same along y. Each
+    line is fitted to the edge points of both squares' sides at once (stage 8's edge points,
+    :func:`visloc.markers.refine.edge_points`) as a quadratic about the corner (the lens bends
+    it; a curvature within 3 standard errors of 0 is dropped), outliers of a first fit
+    dropped: twice the points of either square's side, on both sides of the corner, where each
+    square alone extrapolates its sides to their end. A square that was not ``refined`` (cut
+    by the image's edge, or failed) lends the edge points of its predicted sides as far as
+    they lie inside the image, if the other square was refined. Returns the
+    corner ids (N,) and positions (N, 2) px; a corner whose lines do not cross within 1 px of
+    the refined squares' corner, or with a line of fewer than 6 points, is left out."""
+    radius = np.minimum(radius, _JOINT_RADIUS)
+    ids = corner_ids.ravel()
+    order = np.argsort(ids, kind="stable")
+    ids_sorted = ids[order]
+    first = np.flatnonzero((ids_sorted[:-1] == ids_sorted[1:]) & (ids_sorted[:-1] >= 0))
+    a, b = divmod(order[first], 4), divmod(order[first + 1], 4)  # (square, corner) of each
+    ra, rb = refined[a[0]], refined[b[0]]
+    use = ra | rb
+    first, a, b, ra, rb = first[use], (a[0][use], a[1][use]), (b[0][use], b[1][use]), ra[use], rb[use]
+    if not len(first):
+        return np.zeros(0, np.int64), np.zeros((0, 2))
+    wa = ra / (ra.astype(np.float64) + rb)  # 1/2 each when both were refined
+    c0 = wa[:, None] * quads[a[0], a[1]] + (1.0 - wa)[:, None] * quads[b[0], b[1]]  # the refined squares' corner
+    # a square not refined lends, per corner, its predicted quad with the two sides from that
+    # corner cut where they leave the image (beyond, profiles repeat the image's edge)
+    size, k = gray.shape[::-1], len(quads)
+    (sa, ia), (sb, ib) = (a[0][~ra], a[1][~ra]), (b[0][~rb], b[1][~rb])
+    cut = np.concatenate([_cut_sides(quads[sa], ia, radius[sa], size), _cut_sides(quads[sb], ib, radius[sb], size)])
+    a = (np.where(ra, a[0], k + np.cumsum(~ra) - 1), a[1])
+    b = (np.where(rb, b[0], k + len(sa) + np.cumsum(~rb) - 1), b[1])
+    quads, radius = np.concatenate([quads, cut]), np.concatenate([radius, radius[sa], radius[sb]])
+    sides = np.linalg.norm(np.roll(quads[:k], -1, axis=1) - quads[:k], axis=2)
+    count = int(np.clip(np.median(sides) * (1.0 - 2.0 * _JOINT_GAP), *_JOINT_COUNT))
+    points, _, _, good = edge_points(gray, quads, radius=radius, count=count, end_gap=_JOINT_GAP,
+                                     response=response, levels="side")
+    tangents = [_tangent(points, good, quads, a, b, c0, along) for along in (_ALONG_X, _ALONG_Y)]
+    (p, d), (q, e) = tangents
+    den = d[:, 0] * e[:, 1] - d[:, 1] * e[:, 0]
+    f = q - p
+    u = (f[:, 0] * e[:, 1] - f[:, 1] * e[:, 0]) / np.where(np.abs(den) < 1e-9, np.nan, den)
+    corner = p + u[:, None] * d
+    keep = np.isfinite(corner).all(axis=1) & (np.linalg.norm(corner - c0, axis=1) < 1.0)
+    return ids_sorted[first][keep], corner[keep]
+
+
+def _cut_sides(quads: FloatArray, corner: NDArray[np.int64], radius: NDArray, size: tuple[int, int]) -> FloatArray:
+    """Quads (V, 4, 2) with the two sides from ``corner`` (V,) ended where they come within
+    ``radius + 2`` px of the image's edge (``size`` = (W, H)): their far corners moved toward
+    ``corner`` along them."""
+    out = quads.copy()
+    rows = np.arange(len(quads))
+    lo = (radius + 2.0)[:, None]
+    hi = np.array(size, np.float64) - 1.0 - lo
+    p0 = quads[rows, corner]
+    for far in ((corner + 1) % 4, (corner + 3) % 4):
+        p1 = quads[rows, far]
+        d = p1 - p0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(p1 > hi, (hi - p0) / d, np.where(p1 < lo, (lo - p0) / d, 1.0))
+        t = np.clip(np.nan_to_num(t.min(axis=1), nan=0.0), 0.0, 1.0)
+        out[rows, far] = p0 + t[:, None] * d
+    return out
+
+
+def _tangent(points: FloatArray, good: NDArray[np.bool_], quads: FloatArray, a: tuple, b: tuple, c0: FloatArray,
+             along: NDArray[np.int64]) -> tuple[FloatArray, FloatArray]:
+    """One line of :func:`_joint_corners` per corner: its point next to the corner ``c0``
+    (N, 2) and its direction there (N, 2)."""
+    sa, sb = along[a[1]], along[b[1]]
+    pts = np.concatenate([points[a[0], sa], points[b[0], sb]], axis=1)  # (N, 2M, 2)
+    w = np.concatenate([good[a[0], sa], good[b[0], sb]], axis=1).astype(np.float64)
+    d = quads[a[0], (sa + 1) % 4] - quads[a[0], sa]
+    length = np.maximum(np.linalg.norm(d, axis=1), 1e-9)
+    d = d / length[:, None]
+    n = np.stack([-d[:, 1], d[:, 0]], axis=1)
+    rel = pts - c0[:, None, :]
+    u = (rel * d[:, None, :]).sum(axis=2) / length[:, None]  # along the line, in sides
+    v = (rel * n[:, None, :]).sum(axis=2)  # across it, px
+    basis = np.stack([np.ones_like(u), u, u * u], axis=2)  # (N, 2M, 3)
+    few = w.sum(axis=1) < 6
+    for last in (False, True):  # fit, then refit without the first fit's outliers
+        weighted = np.swapaxes(basis * w[..., None], 1, 2)  # (N, 3, 2M)
+        gram = weighted @ basis + 1e-9 * np.eye(3)
+        rhs = weighted @ v[..., None]  # (N, 3, 1)
+        coef = np.linalg.solve(gram, rhs)[..., 0]
+        res = np.abs(v - (basis @ coef[..., None])[..., 0])
+        rms = np.sqrt((w * res * res).sum(axis=1) / np.maximum(w.sum(axis=1) - 3, 1))
+        if not last:
+            w = w * (res < 2.5 * rms[:, None] + 0.05)
+    straight = np.abs(coef[:, 2]) < 3.0 * rms * np.sqrt(np.linalg.inv(gram)[:, 2, 2])
+    if straight.any():  # a curvature within the noise only adds noise to the corner
+        line = np.linalg.solve(gram[straight][:, :2, :2], rhs[straight][:, :2])[..., 0]
+        coef[straight] = np.concatenate([line, np.zeros((len(line), 1))], axis=1)
+    coef[few] = np.nan  # too few points: no line
+    return c0 + coef[:, :1] * n, d + (coef[:, 1:2] / length[:, None]) * n
 
 
 def _predict(board: CharucoBoard, found: dict[int, FloatArray]) -> tuple[NDArray[np.int64], FloatArray, FloatArray]:

@@ -54,7 +54,7 @@ _LEVEL_Z = 3.0  # standard errors for a side's own levels (_side_levels, as _ref
 #: about as much each pass, and a side that walks along a shadow keeps moving (as _refine.c)
 _SHRINK = 0.8
 
-__all__ = ["NATIVE_REFINE", "bend_corners", "edge_offsets", "refine_quads", "sample_edge_profiles"]
+__all__ = ["NATIVE_REFINE", "bend_corners", "edge_offsets", "edge_points", "refine_quads", "sample_edge_profiles"]
 
 
 def _to_light(gray: NDArray[np.uint8], response: str | float | NDArray) -> NDArray:
@@ -375,6 +375,59 @@ def _refine_pass(light: NDArray, q: NDArray, r: NDArray, count: int, lut: NDArra
     return new, ok
 
 
+def edge_points(
+    gray: NDArray[np.uint8],
+    quads: NDArray,
+    *,
+    radius: int | NDArray = 2,
+    count: int = 40,
+    end_gap: float = 0.08,
+    response: str | float | NDArray = "srgb",
+    levels: str = "auto",
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+    """The edge along ``count`` normals across each side of refined quads, located as stage 8
+    locates it (the area of the step in linear light, each side's own levels on large quads).
+
+    Parameters
+    ----------
+    gray : ndarray (H, W) uint8
+        The grey image.
+    quads : ndarray (K, 4, 2) or (4, 2)
+        Corners ``(x, y)``, px, clockwise (side ``s`` from corner ``s`` to ``s + 1``), K >= 1.
+    radius : int or ndarray (K,) of int
+        Profile half-width, px (as in :func:`refine_quads`).
+    count : int
+        Profiles per side (M), at fractions ``end_gap .. 1 - end_gap`` along it.
+    end_gap : float
+        Fraction of each side left out at both ends.
+    response, levels
+        As in :func:`refine_quads`.
+
+    Returns
+    -------
+    points : ndarray (K, 4, M, 2) float64
+        The edge points ``(x, y)``, px.
+    normals : ndarray (K, 4, 2) float64
+        The sides' outward unit normals.
+    offsets : ndarray (K, 4, M) float64
+        Each point's offset from the straight side along its normal, px.
+    good : ndarray (K, 4, M) bool
+        The profiles that crossed a clean step.
+    """
+    q = np.asarray(quads, np.float64).reshape(-1, 4, 2)
+    r = np.broadcast_to(np.asarray(radius, np.int64), (len(q),))
+    big = int(r.max())
+    # only the part of the image around the quads, in linear light
+    h, w_img = gray.shape
+    x0, y0 = (np.floor(q.reshape(-1, 2).min(axis=0)) - big - 2).astype(int).clip(0)
+    x1, y1 = np.minimum((np.ceil(q.reshape(-1, 2).max(axis=0)) + big + 3).astype(int), [w_img, h])
+    light = _to_light(gray[y0:y1, x0:x1], response)
+    base, normals, prof = sample_edge_profiles(light, q - [x0, y0], big, count=count, end_gap=end_gap)
+    e, good, _, _ = _step_offsets(prof, r, big, np.ones(len(prof), bool), levels == "side")  # offsets, px
+    points = base + [x0, y0] + e[..., None] * normals[:, :, None, :]
+    return points, normals, e, good
+
+
 def bend_corners(
     gray: NDArray[np.uint8],
     quads: NDArray,
@@ -428,15 +481,9 @@ def bend_corners(
     k = len(q)
     if k == 0:
         return q.copy()
+    _, normals, e, good = edge_points(gray, q, radius=radius, count=count, end_gap=end_gap, response=response,
+                                      levels=levels)
     r = np.broadcast_to(np.asarray(radius, np.int64), (k,))
-    big = int(r.max())
-    # only the part of the image around the quads, in linear light
-    h, w_img = gray.shape
-    x0, y0 = (np.floor(q.reshape(-1, 2).min(axis=0)) - big - 2).astype(int).clip(0)
-    x1, y1 = np.minimum((np.ceil(q.reshape(-1, 2).max(axis=0)) + big + 3).astype(int), [w_img, h])
-    light = _to_light(gray[y0:y1, x0:x1], response)
-    _, normals, prof = sample_edge_profiles(light, q - [x0, y0], big, count=count, end_gap=end_gap)
-    e, good, _, _ = _step_offsets(prof, r, big, np.ones(len(prof), bool), levels == "side")  # offsets, px
     w = good.astype(np.float64)
     t = np.linspace(end_gap, 1 - end_gap, count)
     basis = np.stack([np.ones(count), t, t * t], axis=-1)  # (M, 3)

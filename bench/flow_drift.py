@@ -77,7 +77,7 @@ def lk_track(folder: Path, heights: np.ndarray, camera: Camera, size: tuple[int,
     for k in range(1, len(frames)):
         img = cv2.imread(str(frames[k]), cv2.IMREAD_GRAYSCALE)
         motion, _ = lk(prev, img)
-        gv = ground_velocity(motion, camera, float(heights[k - 1]), 1 / 60.0)
+        gv = ground_velocity(motion, camera, float(heights[k]), 1 / 60.0)  # at the second frame, as visloc flow
         c, s = np.cos(yaw), np.sin(yaw)
         step = gv.v / 60.0
         pos = pos + np.array([c * step[0] - s * step[1], s * step[0] + c * step[1]])

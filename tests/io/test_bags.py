@@ -14,6 +14,7 @@ from visloc.cli import main
 from visloc.io import open_source
 from visloc.io.bags import (
     BagSource,
+    _compressed_payload,
     _header,
     _image_message,
     read_bag_imu,
@@ -133,3 +134,23 @@ def test_an_unknown_encoding_costs_its_frame_only(flight, tmp_path):
     assert main(["detect", str(path), "--dict", "DICT_4X4_100", "--out", str(out), "--quiet"]) == 1
     lines = out.read_text().splitlines()
     assert len(lines) == 3 and "yuv422" in lines[1] and '"markers"' in lines[0] and '"markers"' in lines[2]
+
+
+@pytest.mark.parametrize("ros2", [False, True])
+def test_compressed_images_are_read_in_place_as_rosbags_reads_them(flight, ros2):
+    # the header stamp and the image bytes straight from the serialised message, for frame
+    # ids and formats of every length modulo 4 (CDR aligns the fields after each string)
+    store = get_typestore(Stores.ROS2_HUMBLE if ros2 else Stores.ROS1_NOETIC)
+    ok, png = cv2.imencode(".png", flight[2][0])
+    assert ok
+    typ = "sensor_msgs/msg/CompressedImage"
+    for frame_id in ("", "c", "cam", "camera", "camera_1"):
+        for fmt, data in (("png", png.ravel()), ("jpeg", png.ravel()[:101]), ("mono8; png compressed ", png.ravel())):
+            header = _header(store, T0 * 1_000_000_000 + 123_456_789, not ros2, frame_id)
+            msg = store.types[typ](header=header, format=fmt, data=data)
+            raw = bytes(store.serialize_cdr(msg, typ) if ros2 else store.serialize_ros1(msg, typ))
+            stamp, got = _compressed_payload(raw, ros2)
+            assert stamp == T0 * 1_000_000_000 + 123_456_789
+            assert bytes(got) == data.tobytes()
+            assert _compressed_payload(raw[:-1], ros2) is None  # cut short: left to rosbags
+            assert _compressed_payload(raw + b"\0", ros2) is None

@@ -3,7 +3,13 @@ import numpy as np
 import pytest
 
 from tests.conftest import render_square
-from visloc.markers.refine import NATIVE_REFINE, edge_offsets, edge_points, refine_quads, sample_edge_profiles
+from visloc.markers.refine import (
+    NATIVE_REFINE,
+    edge_offsets,
+    edge_points,
+    refine_quads,
+    sample_edge_profiles,
+)
 from visloc.synth.camera import srgb_encode
 
 ENGINES = [False, True] if NATIVE_REFINE else [False]  # numpy, and the compiled one when built
@@ -33,6 +39,7 @@ def test_edge_points_lie_on_the_sides_of_a_blurred_square():
     start = truth + [[0.3, -0.2], [-0.25, 0.3], [0.2, 0.2], [-0.3, -0.1]]  # a quad off by 0.4 px
     pts, normals, offsets, good = edge_points(img, start, radius=4, count=20, response="linear")
     assert pts.shape == (1, 4, 20, 2) and offsets.shape == good.shape == (1, 4, 20) and good.all()
+    assert np.allclose(np.linalg.norm(normals[0], axis=1), 1.0)
     for s in range(4):
         a, b = truth[s], truth[(s + 1) % 4]
         n = np.array([b[1] - a[1], a[0] - b[0]]) / np.linalg.norm(b - a)

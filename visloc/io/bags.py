@@ -124,13 +124,18 @@ def _stamp(msg, log_ns: int) -> int:
     return ns if ns > 0 else int(log_ns)
 
 
+def _decoded(data, fmt: str = "") -> NDArray[np.uint8]:
+    """A compressed image's pixels (grey or BGR, uint8); ``ValueError`` when they cannot be."""
+    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise ValueError(f"compressed image{f' ({fmt})' if fmt else ''} could not be decoded")
+    return to_uint8(img) if img.dtype != np.uint8 else img
+
+
 def _image(msg, msgtype: str) -> NDArray[np.uint8]:
     """The pixels of an image message (grey or BGR, uint8); ``ValueError`` when they cannot be."""
     if msgtype.endswith("CompressedImage"):
-        img = cv2.imdecode(np.frombuffer(msg.data, np.uint8), cv2.IMREAD_UNCHANGED)
-        if img is None:
-            raise ValueError(f"compressed image ({msg.format}) could not be decoded")
-        return to_uint8(img) if img.dtype != np.uint8 else img
+        return _decoded(msg.data, msg.format)
     enc = msg.encoding
     if enc not in _CHANNELS:
         raise ValueError(f"unknown image encoding {enc!r} (read: {', '.join(_CHANNELS)})")
@@ -148,6 +153,43 @@ def _image(msg, msgtype: str) -> NDArray[np.uint8]:
         return to_uint8(img.reshape(h, w).astype(np.uint16))
     img = img.reshape(h, w) if channels == 1 else img
     return cv2.cvtColor(img, convert) if convert is not None else np.ascontiguousarray(img)
+
+
+_U32 = np.dtype("<u4")
+
+
+def _compressed_payload(raw: bytes, ros2: bool) -> tuple[int, memoryview] | None:
+    """A ``sensor_msgs/CompressedImage`` message's header stamp (ns) and its ``data`` bytes,
+    read in place from the serialised message (ROS 1, or little-endian CDR for ROS 2) without
+    building the message object; None when the bytes are not laid out as expected (then the
+    caller deserialises them with rosbags)."""
+    view = memoryview(raw)
+    n = len(view)
+    if ros2:  # encapsulation header, then stamp (sec, nanosec), frame_id, format, data
+        if n < 16 or view[0] != 0 or view[1] != 1:
+            return None
+        sec, nsec = np.frombuffer(view, _U32, 2, 4).tolist()
+        pos = 12
+        for _ in range(2):  # the strings frame_id and format: length (with the NUL), bytes
+            if pos + 4 > n:
+                return None
+            pos += 4 + int(np.frombuffer(view, _U32, 1, pos)[0])
+            pos = 4 + -(-(pos - 4) // 4) * 4  # aligned to 4 from the end of the header
+    else:  # seq, stamp (secs, nsecs), frame_id, format, data
+        if n < 20:
+            return None
+        sec, nsec = np.frombuffer(view, _U32, 2, 4).tolist()
+        pos = 12
+        for _ in range(2):
+            if pos + 4 > n:
+                return None
+            pos += 4 + int(np.frombuffer(view, _U32, 1, pos)[0])
+    if pos + 4 > n:
+        return None
+    size = int(np.frombuffer(view, _U32, 1, pos)[0])
+    if pos + 4 + size != n:
+        return None
+    return sec * 1_000_000_000 + nsec, view[pos + 4 :]
 
 
 class BagSource(FrameSource):
@@ -196,6 +238,11 @@ class BagSource(FrameSource):
                 return
             name = f"{self.path}:{self.topic}#{index}"
             try:
+                fast = _compressed_payload(raw, self._reader.is2) if conn.msgtype.endswith("CompressedImage") else None
+                if fast is not None:  # the pixels straight from the message's bytes
+                    t = ((fast[0] or int(log_ns)) - self.origin_ns) * 1e-9
+                    yield Frame(index, t, _decoded(fast[1]), name)
+                    continue
                 msg = self._reader.deserialize(raw, conn.msgtype)
                 t = (_stamp(msg, log_ns) - self.origin_ns) * 1e-9
                 yield Frame(index, t, _image(msg, conn.msgtype), name)

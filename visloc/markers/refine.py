@@ -379,9 +379,9 @@ def edge_points(
     gray: NDArray[np.uint8],
     quads: NDArray,
     *,
-    radius: int | NDArray = 2,
-    count: int = 40,
-    end_gap: float = 0.08,
+    radius: int | NDArray,
+    count: int = 24,
+    end_gap: float = _END_GAP,
     response: str | float | NDArray = "srgb",
     levels: str = "auto",
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:

@@ -165,25 +165,17 @@ def _compressed_payload(raw: bytes, ros2: bool) -> tuple[int, memoryview] | None
     caller deserialises them with rosbags)."""
     view = memoryview(raw)
     n = len(view)
-    if ros2:  # encapsulation header, then stamp (sec, nanosec), frame_id, format, data
-        if n < 16 or view[0] != 0 or view[1] != 1:
+    if n < 20 or (ros2 and (view[0] != 0 or view[1] != 1)):  # CDR: little-endian encapsulation only
+        return None
+    # the stamp (sec, nanosec) follows ROS 1's seq or CDR's encapsulation header alike
+    sec, nsec = np.frombuffer(view, _U32, 2, 4).tolist()
+    pos = 12
+    for _ in range(2):  # the strings frame_id and format: a length, the bytes (CDR: a NUL, then aligned to 4)
+        if pos + 4 > n:
             return None
-        sec, nsec = np.frombuffer(view, _U32, 2, 4).tolist()
-        pos = 12
-        for _ in range(2):  # the strings frame_id and format: length (with the NUL), bytes
-            if pos + 4 > n:
-                return None
-            pos += 4 + int(np.frombuffer(view, _U32, 1, pos)[0])
-            pos = 4 + -(-(pos - 4) // 4) * 4  # aligned to 4 from the end of the header
-    else:  # seq, stamp (secs, nsecs), frame_id, format, data
-        if n < 20:
-            return None
-        sec, nsec = np.frombuffer(view, _U32, 2, 4).tolist()
-        pos = 12
-        for _ in range(2):
-            if pos + 4 > n:
-                return None
-            pos += 4 + int(np.frombuffer(view, _U32, 1, pos)[0])
+        pos += 4 + int(np.frombuffer(view, _U32, 1, pos)[0])
+        if ros2:
+            pos = 4 + -(-(pos - 4) // 4) * 4  # aligned from the end of the encapsulation header
     if pos + 4 > n:
         return None
     size = int(np.frombuffer(view, _U32, 1, pos)[0])

@@ -23,7 +23,11 @@ visloc's ``MarkerBoard`` corners against OpenCV's ``ArucoDetector`` corners (def
 SUBPIX) matched to the same map points, each calibrated from all 30 views by the same
 ``cv2.calibrateCamera``; errors of fx, fy, cx, cy and k1 against the truth.
 
-Usage: ``python bench/calibrate.py``; writes ``bench/results/calibrate.json`` and ``calibrate.md``.
+A third table shows the corners under growing defocus (12 views per optics blur sigma of 0.8,
+1.5, 2 and 2.5 px): visloc with its default edge fit and with ``method="saddle"``, and OpenCV's
+``CharucoDetector`` (default, SUBPIX).
+
+Usage: ``python bench/calibrate.py`` (about 40 s); writes ``bench/results/calibrate.json`` and ``calibrate.md``.
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ import argparse
 import platform
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -200,6 +205,37 @@ def run_grid(seeds: list[int]) -> dict:
                 "seconds_30_views_median": float(np.median(s["seconds"]))} for m, s in stats.items()}
 
 
+#: optics blur (sigma, px) of the defocus table, and its views per blur
+DEFOCUS_BLURS, DEFOCUS_VIEWS = (0.8, 1.5, 2.0, 2.5), 12
+
+
+def run_defocus(seed: int = 5) -> dict:
+    """Corner errors under growing defocus: ``DEFOCUS_VIEWS`` views per optics blur (the
+    calibration camera otherwise), visloc's two refinements (``method="edges"``, the default,
+    and ``"saddle"``) and OpenCV's ``CharucoDetector`` (default, SUBPIX)."""
+    run_ = methods()
+    run_["visloc_saddle"] = lambda img: detect_charuco(img, BOARD, method="saddle")
+    out = {}
+    for blur in DEFOCUS_BLURS:
+        print(f"calibrate: defocus {blur} px ...", file=sys.stderr, flush=True)
+        views = calibration_views(BOARD, DEFOCUS_VIEWS, size=SIZE, seed=seed,
+                                  camera=replace(CALIBRATION_CAMERA, blur_sigma=blur))
+        row = {}
+        for m, run_m in run_.items():
+            e, visible = [], 0
+            for view in views:
+                f = run_m(view.image)
+                e.extend(np.linalg.norm(f.corners - view.corners[f.ids], axis=1).tolist())
+                visible += int(view.visible.sum())
+            e = np.array(e)
+            row[m] = {"found": len(e), "visible": visible,
+                      "corner_rms_px": float(np.sqrt(np.mean(e**2))) if len(e) else None,
+                      "corner_median_px": float(np.median(e)) if len(e) else None,
+                      "corner_max_px": float(e.max()) if len(e) else None}
+        out[str(blur)] = row
+    return out
+
+
 def markdown(result: dict) -> str:
     res = result["methods"]
     lines = [(f"\n**ChArUco calibration**, {SIZE[0]}x{SIZE[1]} camera-like views of a 9 x 6 board, "
@@ -223,6 +259,15 @@ def markdown(result: dict) -> str:
             lines.append(f"| {m} | {s['found']}/{s['visible']} | {fmt(s['corner_rms_px'])} | "
                          f"{fmt(s['corner_median_px'])} | {fmt(s['f_err_px_mean'], 2)} | {fmt(s['c_err_px_mean'], 2)} | "
                          f"{fmt(s['k1_err_mean'], 4)} | {fmt(s['seconds_30_views_median'], 2)} |")
+    if "defocus" in result:
+        lines += [(f"\n**ChArUco corners under defocus** ({DEFOCUS_VIEWS} camera-like {SIZE[0]}x{SIZE[1]} views per "
+                   "optics blur sigma, the board's white margins 4 mm on 30 mm squares; errors against the truth)\n"),
+                  "| blur sigma px | method | corners found / visible | corner RMS px | corner median px | worst px |",
+                  "|---|---|---|---|---|---|"]
+        for blur, row in result["defocus"].items():
+            for m, s in row.items():
+                lines.append(f"| {blur} | {m} | {s['found']}/{s['visible']} | {fmt(s['corner_rms_px'])} | "
+                             f"{fmt(s['corner_median_px'])} | {fmt(s['corner_max_px'], 2)} |")
     return "\n".join(lines) + "\n"
 
 
@@ -234,7 +279,7 @@ def main(argv=None) -> int:
     seeds = list(range(args.sets))
     result = {"machine": {"python": sys.version.split()[0], "opencv": cv2.__version__, "numpy": np.__version__,
                           "platform": platform.platform(), "cores": len(__import__("os").sched_getaffinity(0))},
-              "seeds": seeds, "methods": run(seeds), "grid": run_grid(seeds)}
+              "seeds": seeds, "methods": run(seeds), "grid": run_grid(seeds), "defocus": run_defocus()}
     write_results(args.out, "calibrate", result, markdown(result))
     return 0
 

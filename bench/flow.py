@@ -20,7 +20,8 @@ same way (visloc's ``ground_velocity``), so the comparison is of the image motio
 - ``phase``: ``cv2.phaseCorrelate`` (translation only).
 
 More sets pass the same flights through a camera (``FLOW_CAMERA``: optics blur, shot and read
-noise, vignetting, the sRGB curve, 8-bit quantisation): at 320x240 and at 640x480; at 320x240
+noise, vignetting, the sRGB curve, 8-bit quantisation, and the motion blur of each frame's
+flight speed over an exposure of half the frame interval): at 320x240 and at 640x480; at 320x240
 with every other frame exposed 20 % more (auto exposure stepping); slow flight (under 0.3 m/s
 at 1.5-2.5 m: the image moves less than a pixel per frame, the hover regime); and a moving
 shadow (a soft band of 40 % less light drifting 0.5 px per frame over the ground). Each pair's
@@ -127,9 +128,22 @@ def make_methods(size: tuple[int, int]) -> dict:
 
 #: the camera of the camera-like sets: optics blur, shot and read noise, vignetting, the sRGB
 #: curve, 8-bit quantisation; no lens distortion (every method maps image motion to velocity
-#: through the same pinhole model)
+#: through the same pinhole model); each frame also gets the motion blur of its flight speed
+#: (:func:`moving`)
 FLOW_CAMERA = CameraEffects(blur_sigma=0.7, full_well=5000.0, read_noise=1.0, vignetting=0.2, k1=0.0,
                             jpeg_quality=None)
+
+#: exposure time of the camera-like frames, as a fraction of the frame interval (1/120 s at
+#: 60 FPS, an auto exposure indoors)
+FLOW_EXPOSURE = 0.5
+
+
+def moving(camera: CameraEffects, v_cam, height: float, f: float, fps: float = 60.0) -> CameraEffects:
+    """``camera`` with the linear motion blur of a frame taken at velocity ``v_cam`` (m/s along
+    the camera's x and y) and ``height`` (m) with focal length ``f`` (px): the ground's image
+    moves ``f |v| / height`` px/s during ``FLOW_EXPOSURE / fps`` s (rotation is not counted)."""
+    length = float(np.hypot(v_cam[0], v_cam[1])) * f / height * FLOW_EXPOSURE / fps
+    return replace(camera, motion_blur=length, motion_angle=float(np.arctan2(v_cam[1], v_cam[0])))
 
 
 #: the moving-shadow set: a band of 40 % less light, a third of the image wide with soft edges,
@@ -155,8 +169,10 @@ def _frames(fl, camera, exposure_step, seed, shadow=False):
         return list(fl.frames)
     rng = np.random.default_rng(seed)
     out = []
+    tr = fl.track
     for k, f in enumerate(fl.frames):
-        fx = replace(camera, exposure=1.2) if exposure_step and k % 2 else camera
+        fx = moving(camera, tr.v_cam[k], float(tr.position[k, 2]), float(fl.K[0, 0]))
+        fx = replace(fx, exposure=1.2) if exposure_step and k % 2 else fx
         light = f.astype(np.float64) * (_shadow(f.shape, k) if shadow else 1.0)
         out.append(apply_camera(light, fl.K, fx, rng=rng)[0])
     return out

@@ -3,7 +3,7 @@
 Each flight is rendered by the CLI (``visloc render flow OUT --seconds 10``: PNG frames, its
 camera file, ground truth and heights), and a second time through a camera
 (``bench/flow.py``'s ``FLOW_CAMERA``: optics blur, shot and read noise, vignetting, the sRGB
-curve, 8-bit quantisation). On each folder:
+curve, 8-bit quantisation, and each frame's motion blur over half the frame interval). On each folder:
 
 - ``visloc`` and ``visloc_direct``: the CLI itself, ``visloc flow DIR --camera camera.yml
   --height-csv heights.csv --fps 60 [--direct] --out track.csv``, whose ``x, y`` columns are
@@ -32,7 +32,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 from _results import fmt, write_results
-from flow import FLOW_CAMERA, make_methods
+from flow import FLOW_CAMERA, make_methods, moving
 
 from visloc.flow import ground_velocity
 from visloc.pose import Camera
@@ -88,15 +88,20 @@ def lk_track(folder: Path, heights: np.ndarray, camera: Camera, size: tuple[int,
 
 
 def camera_like(src: Path, dst: Path, seed: int) -> None:
-    """The flight's frames through ``FLOW_CAMERA`` (linear light in, 8-bit sRGB out)."""
+    """The flight's frames through ``FLOW_CAMERA`` (linear light in, 8-bit sRGB out), each with
+    the motion blur of its speed (``bench/flow.py``'s ``moving``, from ``ground_truth.csv``)."""
     dst.mkdir()
     for name in ("camera.yml", "heights.csv", "ground_truth.csv"):
         (dst / name).write_bytes((src / name).read_bytes())
     K = Camera.from_file(src / "camera.yml").K
+    with (src / "ground_truth.csv").open() as fh:
+        truth = {int(r["frame"]): r for r in csv.DictReader(fh)}
     rng = np.random.default_rng(seed)
-    for f in sorted(src.glob("frame_*.png")):
+    for k, f in enumerate(sorted(src.glob("frame_*.png"))):
         img = cv2.imread(str(f), cv2.IMREAD_GRAYSCALE).astype(np.float64)
-        cv2.imwrite(str(dst / f.name), apply_camera(img, K, FLOW_CAMERA, rng=rng)[0])
+        row = truth[k]
+        cam = moving(FLOW_CAMERA, (float(row["vx"]), float(row["vy"])), float(row["height"]), float(K[0, 0]))
+        cv2.imwrite(str(dst / f.name), apply_camera(img, K, cam, rng=rng)[0])
 
 
 def errors(est: np.ndarray, truth: np.ndarray) -> dict:

@@ -262,8 +262,8 @@ def blurred(img: NDArray[np.uint8], *, sigma: float = 1.0, local: bool = False) 
         against division by dark), times 128: light that varies slowly across the image (a
         shadow moving over the ground, vignetting, uneven light) then no longer reads as
         motion. On camera-like 320 x 240 flights with a moving shadow (``bench/flow.py``) the
-        streamed median relative error fell from 0.75 % to 0.16 % (LK 0.59 %), the time per
-        pair rose from 0.34 to 0.51 of DIS's.
+        streamed median relative error fell from 0.90 % to 0.19 % (LK 0.84 %), the time per
+        pair rose from 0.32 to 0.52 of DIS's.
 
     Returns
     -------

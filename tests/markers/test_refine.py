@@ -15,6 +15,14 @@ from visloc.synth.camera import srgb_encode
 ENGINES = [False, True] if NATIVE_REFINE else [False]  # numpy, and the compiled one when built
 
 
+def _turned_square(rng):
+    """The corners (4, 2) of a square 30-50 px wide near (50, 50), turned by up to 90 degrees."""
+    c = rng.uniform(45, 55, 2)
+    a = rng.uniform(0, np.pi / 2)
+    rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    return c + np.array([[-1, -1], [1, -1], [1, 1], [-1, 1.0]]) * rng.uniform(15, 25) @ rot.T
+
+
 def test_edge_offsets_exact_for_an_area_sampled_step():
     # pixel k covers [k - 0.5, k + 0.5]; an edge at e inside the window -> exact recovery
     for e in (-1.3, -0.5, 0.0, 0.21, 0.77, 1.4):
@@ -51,12 +59,7 @@ def test_edge_points_lie_on_the_sides_of_a_blurred_square():
 @pytest.mark.parametrize("blur", [0.0, 0.8, 1.5])
 def test_refine_recovers_subpixel_corners(blur, native, rng):
     for _ in range(5):
-        c = rng.uniform(45, 55, 2)
-        a = rng.uniform(0, np.pi / 2)
-        rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
-        half = rng.uniform(15, 25)
-        truth = c + np.array([[-1, -1], [1, -1], [1, 1], [-1, 1.0]]) * half @ rot.T
-        truth = truth + rng.normal(0, 1.0, (4, 2))  # perspective-like irregular quad
+        truth = _turned_square(rng) + rng.normal(0, 1.0, (4, 2))  # perspective-like irregular quad
         img = render_square((100, 100), truth, blur=blur)
         start = truth + rng.uniform(-0.8, 0.8, (4, 2))
         out, ok = refine_quads(img, start[None], radius=3, iterations=3, response="linear", native=native)
@@ -73,10 +76,7 @@ def test_more_passes_follow_blur_wider_than_the_profiles(native):
     rng = np.random.default_rng(3)
     two, more = [], []
     for _ in range(6):
-        c = rng.uniform(45, 55, 2)
-        a = rng.uniform(0, np.pi / 2)
-        rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
-        truth = c + np.array([[-1, -1], [1, -1], [1, 1], [-1, 1.0]]) * rng.uniform(15, 25) @ rot.T
+        truth = _turned_square(rng)
         img = render_square((100, 100), truth, blur=2.0)
         start = truth + rng.uniform(-1.5, 1.5, (4, 2))
         for max_iterations, errs in ((None, two), (8, more)):
@@ -104,10 +104,7 @@ def test_refine_measures_edges_in_linear_light_on_srgb_images(blur, native, rng)
     # response the corners are as accurate as on a linear image; read as linear they are not
     srgb_err, linear_err = [], []
     for _ in range(5):
-        c = rng.uniform(45, 55, 2)
-        a = rng.uniform(0, np.pi / 2)
-        rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
-        truth = c + np.array([[-1, -1], [1, -1], [1, 1], [-1, 1.0]]) * rng.uniform(15, 25) @ rot.T
+        truth = _turned_square(rng)
         linear = render_square((100, 100), truth, dark=3, bright=200, blur=0).astype(np.float64)
         linear = cv2.GaussianBlur(linear, (0, 0), blur)
         img = np.round(255 * srgb_encode(linear / 255)).astype(np.uint8)

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import functools
 import os
+import struct
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -155,9 +156,6 @@ def _image(msg, msgtype: str) -> NDArray[np.uint8]:
     return cv2.cvtColor(img, convert) if convert is not None else np.ascontiguousarray(img)
 
 
-_U32 = np.dtype("<u4")
-
-
 def _compressed_payload(raw: bytes, ros2: bool) -> tuple[int, memoryview] | None:
     """A ``sensor_msgs/CompressedImage`` message's header stamp (ns) and its ``data`` bytes,
     read in place from the serialised message (ROS 1, or little-endian CDR for ROS 2) without
@@ -168,17 +166,17 @@ def _compressed_payload(raw: bytes, ros2: bool) -> tuple[int, memoryview] | None
     if n < 20 or (ros2 and (view[0] != 0 or view[1] != 1)):  # CDR: little-endian encapsulation only
         return None
     # the stamp (sec, nanosec) follows ROS 1's seq or CDR's encapsulation header alike
-    sec, nsec = np.frombuffer(view, _U32, 2, 4).tolist()
+    sec, nsec = struct.unpack_from("<II", view, 4)
     pos = 12
     for _ in range(2):  # the strings frame_id and format: a length, the bytes (CDR: a NUL, then aligned to 4)
         if pos + 4 > n:
             return None
-        pos += 4 + int(np.frombuffer(view, _U32, 1, pos)[0])
+        pos += 4 + struct.unpack_from("<I", view, pos)[0]
         if ros2:
             pos = 4 + -(-(pos - 4) // 4) * 4  # aligned from the end of the encapsulation header
     if pos + 4 > n:
         return None
-    size = int(np.frombuffer(view, _U32, 1, pos)[0])
+    size = struct.unpack_from("<I", view, pos)[0]
     if pos + 4 + size != n:
         return None
     return sec * 1_000_000_000 + nsec, view[pos + 4 :]

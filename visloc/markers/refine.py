@@ -386,7 +386,8 @@ def edge_points(
     levels: str = "auto",
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
     """The edge along ``count`` normals across each side of refined quads, located as stage 8
-    locates it (the area of the step in linear light, each side's own levels on large quads).
+    locates it (the area of the step in linear light, each side read by its own levels where
+    they differ from its quad's: ``_side_levels``, as for the large quads of stage 8).
 
     Parameters
     ----------

@@ -90,8 +90,17 @@ def test_scenarios_and_bad_input():
         simulate("hover", dt=0.0)
     with pytest.raises(ValueError, match="estimator"):
         simulate(Scenario("x", "", 1.0, estimator="gps"))
+    with pytest.raises(ValueError, match="redetect_every"):
+        simulate("hover", redetect_every=0)
     d = simulate("hover", seconds=0.5).to_dict()
     assert {"status", "settling_time_s", "overshoot_pct", "position_rms_m", "realtime_factor"} <= set(d)
+
+
+def test_one_rk4_step_per_control_period_is_as_accurate_as_1_ms():
+    # the default step without a motor lag: the inputs are held over the control period
+    fine, default = simulate("sidestep", dt=0.001, seconds=3.0), simulate("sidestep", seconds=3.0)
+    assert np.abs(fine.state - default.state).max() < 1e-7
+    assert fine.metrics["overshoot_pct"] == pytest.approx(default.metrics["overshoot_pct"], abs=1e-6)
 
 
 def test_ctrl_c_keeps_the_steps_flown_so_far():

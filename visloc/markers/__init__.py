@@ -8,6 +8,7 @@ from visloc.markers.detector import (
     SearchPass,
 )
 from visloc.markers.dictionary import Dictionary, load_dictionary
+from visloc.markers.tracker import MarkerTracker
 
 __all__ = [
     "FAST_PASSES",
@@ -15,6 +16,7 @@ __all__ = [
     "DetectorParams",
     "Dictionary",
     "MarkerDetector",
+    "MarkerTracker",
     "SearchPass",
     "load_dictionary",
 ]

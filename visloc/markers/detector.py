@@ -408,6 +408,47 @@ class MarkerDetector:
         """Markers in ``image`` (uint8 grey or BGR), sorted by id."""
         return self._run(image, None)
 
+    def confirm(self, image: NDArray[np.uint8], quads: NDArray, ids: NDArray, *,
+                inverted: bool = False) -> list[MarkerDetection | None]:
+        """Stages 8-10 alone, on quads where known markers are expected (a tracker's
+        prediction from earlier frames, :class:`visloc.markers.MarkerTracker`).
+
+        Each quad is refined on the grey image (stage 8 converges onto the marker's edges
+        from within its profile half-width, about 0.4 cell), read and matched against the
+        dictionary exactly as a candidate of :meth:`detect` is; it stands only if the
+        refinement succeeded and the marker decodes to the expected id with its own top-left
+        corner at the quad's corner 0.
+
+        Parameters
+        ----------
+        image : ndarray (H, W) or (H, W, 3) uint8
+            The frame (grey or BGR).
+        quads : array_like (K, 4, 2)
+            Expected corners, px, clockwise from each marker's own top-left corner.
+        ids : array_like (K,) int
+            The id expected at each quad.
+        inverted : bool
+            Whether the markers are white on black.
+
+        Returns
+        -------
+        list of MarkerDetection or None
+            Per quad, the detection (``rotation`` 0: no contour was followed) or None.
+        """
+        q = np.asarray(quads, dtype=np.float64)
+        want = np.asarray(ids).reshape(-1)
+        if q.ndim != 3 or q.shape[1:] != (4, 2) or len(want) != len(q):
+            raise ValueError(f"quads, ids: expected (K, 4, 2) corners and K ids, got shapes {q.shape} and {want.shape}")
+        if not len(q):
+            return []
+        if not np.isfinite(q).all():
+            raise ValueError("quads: corners must be finite")
+        gray = to_gray(image)
+        gray = cv2.bitwise_not(gray) if inverted else gray
+        made = self._made(gray, q, bool(inverted), retry_fit=False)[2]
+        return [d if d is not None and d.id == int(k) and d.rotation == 0 and d.refined else None
+                for d, k in zip(made, want.tolist(), strict=True)]
+
     def trace(self, image: NDArray[np.uint8]) -> DetectionTrace:
         """Run :meth:`detect` keeping every stage's intermediate result."""
         log: dict = {"candidates": [], "passes": []}
@@ -664,9 +705,6 @@ class MarkerDetector:
               log: dict | None, taken: NDArray | None = None) -> list[MarkerDetection]:
         """Stages 6-10 on the candidates of the searches (stages 2-5), in order (6-7:
         :meth:`_propose`), passing over candidates that repeat a quad of ``taken`` (K, 4, 2)."""
-        p = self.params
-        bb = p.border_bits
-        n_cells = self.dictionary.marker_size + 2 * bb
         cands = _Cands()
         if taken is None:
             taken = np.zeros((0, 4, 2))  # the polygons of the candidates fitted so far
@@ -678,6 +716,54 @@ class MarkerDetector:
         if not cands.quads:
             return []
         quads = np.array(cands.quads)
+        cells, reads, made, areas = self._made(gray, quads, inverted)
+        valid, bits = reads[:2]
+        found: list[tuple[MarkerDetection, float]] = []
+        for i, det in enumerate(made):
+            cell_i = CellSample(cells.cells[i : i + 1], cells.ring[i : i + 1]) if log is not None else None
+            if det is None:
+                if log is not None:
+                    stage, b = ("bits", None) if not valid[i] else ("dictionary", bits[i])
+                    _note(log, cands.contours[i], cands.scales[i], cands.splits[i], quads[i], cell_i, b, None, stage)
+                continue
+            found.append((det, areas[i]))
+            _note(log, cands.contours[i], cands.scales[i], cands.splits[i], quads[i], cell_i, bits[i], det, "accepted")
+        dets = _merge_duplicates(found)
+        if log is not None and len(dets) < len(found):
+            kept_ids = {id(d) for d in dets}
+            for j, c in enumerate(log["candidates"]):
+                if c.detection is not None and id(c.detection) not in kept_ids:
+                    log["candidates"][j] = replace(c, stage="duplicate")
+        return dets
+
+    def _made(self, gray: NDArray[np.uint8], quads: NDArray, inverted: bool, *, retry_fit: bool = True
+              ) -> tuple[CellSample, list[NDArray], list[MarkerDetection | None], list[float]]:
+        """Stages 8-10 (:meth:`_read`) on candidate quads (K, 4, 2), and what they make:
+        ``(cells, reads, detections, areas)``, a :class:`MarkerDetection` per accepted
+        candidate (corners from the marker's own top-left corner) and None per rejected one,
+        with each quad's area, px^2. ``retry_fit``: as :meth:`_read`."""
+        corners, refined, cells, reads, accept, confidence = self._read(gray, quads, inverted, retry_fit=retry_fit)
+        ids, shift, hamming = reads[5:8]
+        order = (_FOUR[None, :] + shift[:, None]) % 4  # all at once
+        rolled = corners[np.arange(len(corners))[:, None], order]
+        rows = zip(accept.tolist(), ids.tolist(), hamming.tolist(), reads[2].tolist(), shift.tolist(),
+                   reads[3].tolist(), refined.tolist(), confidence.tolist(), strict=True)
+        made = [MarkerDetection(int(mid), rolled[i], int(ham), float(mar), int(rot), float(con), bool(ref),
+                                float(conf), inverted) if ok else None
+                for i, (ok, mid, ham, mar, rot, con, ref, conf) in enumerate(rows)]
+        return cells, reads, made, np.abs(_areas(rolled)).tolist()
+
+    def _read(self, gray: NDArray[np.uint8], quads: NDArray, inverted: bool, *, retry_fit: bool = True) -> tuple:
+        """Stages 8-10 on candidate quads (K, 4, 2) in full-resolution pixels: edge
+        refinement, cell reads (a second read where the first does not decode) and the
+        dictionary match. Returns ``(corners, refined, cells, reads, accept, confidence)``:
+        ``reads`` is (valid, bits, margin, contrast, threshold, ids, shift, hamming, matched),
+        ``accept`` (K,) the candidates that decode and pass OpenCV's cell-area check.
+        ``retry_fit`` False: no second read through ``quads`` themselves (they are
+        predictions, not stage-7 fits)."""
+        p = self.params
+        bb = p.border_bits
+        n_cells = self.dictionary.marker_size + 2 * bb
         corners, refined = quads, np.zeros(len(quads), bool)
         if p.refine:  # stage 8, batched
             side = np.sqrt(np.abs(_areas(quads)))
@@ -692,44 +778,18 @@ class MarkerDetector:
         valid, bits, margin, contrast, thr = (np.array(a) for a in (valid, bits, margin, contrast, thr))
         reads = [valid, bits, margin, contrast, thr,
                  *decode(bits, self.dictionary, error_correction_rate=p.error_correction_rate)]  # 10
-        cells = self._second_reads(gray, quads, corners, refined, cells, reads)
-        valid, bits, margin, contrast, thr, ids, shift, hamming, matched = reads
+        cells = self._second_reads(gray, quads, corners, refined, cells, reads, retry_fit=retry_fit)
+        valid, thr, ids, shift, matched = reads[0], reads[4], reads[5], reads[6], reads[8]
         accept = valid & matched
         confidence = np.zeros(len(quads))
         if accept.any():  # OpenCV's read of the accepted markers: cell areas, confidence, bit threshold
             acc = np.flatnonzero(accept)
             confidence[acc], clear = self._area_check(gray, corners[acc], thr[acc], ids[acc], shift[acc])
             accept[acc[~clear]] = False
-        confidence = confidence.tolist()
-        # each accepted quad from the marker's own top-left corner, and its area (all at once)
-        order = (_FOUR[None, :] + shift[:, None]) % 4
-        rolled = corners[np.arange(len(corners))[:, None], order]
-        areas = np.abs(_areas(rolled)).tolist()
-        found: list[tuple[MarkerDetection, float]] = []
-        rows = zip(ids.tolist(), hamming.tolist(), margin.tolist(), shift.tolist(), contrast.tolist(),
-                   refined.tolist(), confidence, strict=True)
-        for i, (mid, ham, mar, rot, con, ref, conf) in enumerate(rows):
-            cell_i = CellSample(cells.cells[i : i + 1], cells.ring[i : i + 1]) if log is not None else None
-            if not accept[i]:
-                if log is not None:
-                    stage, b = ("bits", None) if not valid[i] else ("dictionary", bits[i])
-                    _note(log, cands.contours[i], cands.scales[i], cands.splits[i], quads[i], cell_i, b, None, stage)
-                continue
-            det = MarkerDetection(int(mid), rolled[i], int(ham), float(mar), int(rot), float(con), bool(ref), conf,
-                                  inverted)
-            found.append((det, areas[i]))
-            _note(log, cands.contours[i], cands.scales[i], cands.splits[i], quads[i], cell_i, bits[i], det, "accepted")
-        dets = _merge_duplicates(found)
-        if log is not None and len(dets) < len(found):
-            kept_ids = {id(d) for d in dets}
-            for j, c in enumerate(log["candidates"]):
-                if c.detection is not None and id(c.detection) not in kept_ids:
-                    log["candidates"][j] = replace(c, stage="duplicate")
-        return dets
-
+        return corners, refined, cells, reads, accept, confidence
 
     def _second_reads(self, gray: NDArray[np.uint8], quads: NDArray, corners: NDArray, refined: NDArray,
-                      cells: CellSample, reads: list[NDArray]) -> CellSample:
+                      cells: CellSample, reads: list[NDArray], *, retry_fit: bool = True) -> CellSample:
         """Stages 9-10 again for the candidates the first read did not decode: with a
         threshold that follows the light across the marker (glare, shadow edges), then
         through the stage-7 corners ``quads`` (a marker of about a pixel per cell can read
@@ -740,7 +800,7 @@ class MarkerDetector:
         p = self.params
         bb = p.border_bits
         n_cells = self.dictionary.marker_size + 2 * bb
-        for use_fit, shading in ((False, True), (True, False)):
+        for use_fit, shading in ((False, True), (True, False))[:2 if retry_fit else 1]:
             retry = np.flatnonzero(~(reads[0] & reads[8]) & (refined if use_fit else True))
             if not len(retry):
                 continue

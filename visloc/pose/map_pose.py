@@ -70,14 +70,13 @@ class MapPose:
         cov = self.pose.covariance
         if cov is None:
             return None
-        p = self.pose.params
-        J = np.zeros((3, 6))
-        J[:, :3] = -euler_to_matrix(p[3:]).T
-        for k in range(3):  # angles: central differences
-            h = 1e-6
-            dp = np.zeros(3)
-            dp[k] = h
-            J[:, 3 + k] = (-(euler_to_matrix(p[3:] + dp).T @ p[:3]) + euler_to_matrix(p[3:] - dp).T @ p[:3]) / (2 * h)
+        t, angles = self.pose.t, matrix_to_euler(self.pose.R)
+        h = 1e-6  # the angles' columns: central differences, the seven rotations at once
+        R = euler_to_matrix(angles + np.concatenate([np.zeros((1, 3)), h * np.eye(3), -h * np.eye(3)]))
+        c = -(np.swapaxes(R, 1, 2) @ t)  # (7, 3) camera centres
+        J = np.empty((3, 6))
+        J[:, :3] = -R[0].T
+        J[:, 3:] = ((c[1:4] - c[4:7]) / (2 * h)).T
         out = J @ cov @ J.T
         return 0.5 * (out + out.T)
 

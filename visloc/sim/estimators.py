@@ -2,7 +2,8 @@
 
 - :class:`TruthEstimator`: the true state (the report's linear-design setting).
 - :class:`VisionEstimator`: visloc's own pipeline. Each bottom-camera image goes through
-  :class:`visloc.markers.MarkerDetector` and :func:`visloc.pose.estimate_camera_pose` (the
+  :class:`visloc.markers.MarkerTracker` (the detector's full search every ``redetect_every``
+  frames, the markers of the previous frames followed between) and :func:`visloc.pose.estimate_camera_pose` (the
   report's marker grid, §3.2.2); the camera-centre fix corrects the Kalman filter of
   :class:`visloc.estimation.fusion.MapFixFusion` (filterpy inside) that integrates the
   accelerometer, rotated into the inertial frame, at the IMU rate. The attitude integrates the gyro (report eq. 2.3)
@@ -25,6 +26,7 @@ from visloc.control.controller import wrap_angle
 from visloc.estimation.fusion import MapFixFusion
 from visloc.estimation.height import ultrasound_height
 from visloc.markers.detector import MarkerDetector
+from visloc.markers.tracker import MarkerTracker
 from visloc.model.rigid_body import euler_rate_matrix, rotation_matrix
 from visloc.pose.camera import Camera
 from visloc.pose.map_pose import estimate_camera_pose
@@ -72,6 +74,10 @@ class VisionEstimator:
         :func:`visloc.pose.estimate_camera_pose` with its propagated covariance.
     fix_std : float
         Standard deviation of a fix without covariance, m.
+    redetect_every : int
+        visloc's front end: a full marker detection at least every this many frames, the
+        markers followed from frame to frame between (:class:`visloc.markers.MarkerTracker`;
+        1: the full detection on every frame).
 
     Attributes
     ----------
@@ -87,12 +93,13 @@ class VisionEstimator:
                  attitude_gain: float = 5.0, accel_std: float = 0.3,
                  min_fix_std: float = 0.002,
                  localizer: Callable[[NDArray[np.uint8]], tuple[Pose, FloatArray | None] | None]
-                 | None = None, fix_std: float = 0.005) -> None:
+                 | None = None, fix_std: float = 0.005, redetect_every: int = 10) -> None:
         if not isinstance(camera, BottomCamera):
             raise TypeError(f"camera: expected BottomCamera, got {type(camera).__name__}")
         s = as_array(initial_state, "initial_state", (12,))
         self.camera = camera
         self.detector = MarkerDetector(camera.dictionary, response="linear")  # the floor renders are linear
+        self.tracker = MarkerTracker(self.detector, redetect_every=redetect_every)
         self.intrinsics = Camera(camera.K)
         self.g = check_real(g, "g", positive=True)
         self.attitude_gain = check_real(attitude_gain, "attitude_gain", positive=True)
@@ -128,7 +135,7 @@ class VisionEstimator:
         self.fusion.predict(t, accel, rotation_matrix(self.lam), gravity=(0.0, 0.0, self.g), accel_std=self.accel_std)
 
     def _visloc_fix(self, image: NDArray[np.uint8]) -> tuple[Pose, FloatArray | None] | None:
-        fix = estimate_camera_pose(self.detector.detect(image), self.camera.marker_map,
+        fix = estimate_camera_pose(self.tracker.detect(image), self.camera.marker_map,
                                    self.intrinsics)
         return None if fix is None else (fix.pose, fix.position_covariance)
 

@@ -132,7 +132,7 @@ def simulate(
     specs: ControlSpecs | None = None,
     gains: ControllerGains | None = None,
     seconds: float | None = None,
-    dt: float = 0.001,
+    dt: float | None = None,
     control_rate: float = 200.0,
     camera_rate: float = 30.0,
     motor_lag: float = 0.0,
@@ -140,6 +140,7 @@ def simulate(
     localizer: Callable | None = None,
     warmup: float | None = None,
     max_tilt: float = 0.3,
+    redetect_every: int = 10,
 ) -> SimResult:
     """Fly ``scenario`` in closed loop on the non-linear model: build the vehicle (motors
     drawn at ``sigma``), the controller, the sensors and the estimator, hover ``warmup`` s,
@@ -167,7 +168,9 @@ def simulate(
         Override the scenario's duration, s (> 0).
     dt : float
         RK4 step of the vehicle, s (> 0; rounded so that a whole number of steps fits in a
-        control period).
+        control period). Default: one step per control period without a motor lag (the
+        inputs are held over the period; the scenarios' states agree with 1 ms steps within
+        1e-8 m and rad), 1 ms with one (the lagged inputs change within the period).
     control_rate, camera_rate : float
         Controller / IMU rate and bottom-camera rate, Hz (> 0).
     motor_lag : float
@@ -186,6 +189,10 @@ def simulate(
         tilt it asks for, rad (report §4.4; :class:`visloc.control.Controller`); ``math.inf``:
         unbounded, the report's controller before that bound (large set-point steps tip it
         over).
+    redetect_every : int
+        visloc's vision front end: a full marker detection at least every this many camera
+        frames, the markers followed from frame to frame between
+        (:class:`visloc.markers.MarkerTracker`); 1: the full detection on every frame.
 
     Returns
     -------
@@ -202,7 +209,8 @@ def simulate(
     ValueError
         Unknown scenario name or estimator; ``seconds``, ``dt``, ``control_rate`` or
         ``camera_rate`` not finite and > 0; ``sigma``, ``warmup`` or ``motor_lag`` negative;
-        ``sigma`` so large that a motor coefficient is not > 0; ``arm`` not > 0.
+        ``sigma`` so large that a motor coefficient is not > 0; ``arm`` not > 0;
+        ``redetect_every`` not an integer >= 1.
 
     Notes
     -----
@@ -220,10 +228,13 @@ def simulate(
     p = check_params(params)
     p = replace(p, arm=resolve_arm(p, arm))
     duration = sc.seconds if seconds is None else check_real(seconds, "seconds", positive=True)
-    h = _check_rate(dt, "dt")
     ctrl_dt = 1.0 / _check_rate(control_rate, "control_rate")
+    lag = check_real(motor_lag, "motor_lag", nonneg=True)
+    h = _check_rate(dt, "dt") if dt is not None else (0.001 if lag > 0 else ctrl_dt)
     substeps = max(1, round(ctrl_dt / h))
     cam_dt = 1.0 / _check_rate(camera_rate, "camera_rate")
+    if isinstance(redetect_every, bool) or not isinstance(redetect_every, int) or redetect_every < 1:
+        raise ValueError(f"redetect_every must be an integer >= 1, got {redetect_every!r}")
     rng = np.random.default_rng(seed)
     c, d = motor_coefficients(p, sigma, seed=seed)
     vehicle = Vehicle(p, c=c, d=d, motor_lag=motor_lag, state=_at(sc.start_setpoint))
@@ -232,7 +243,7 @@ def simulate(
     lead = (WARMUP_SECONDS if sigma > 0 else 0.0) if warmup is None else check_real(
         warmup, "warmup", nonneg=True)
     _hover(vehicle, controller, sc.start_setpoint, round(lead / ctrl_dt), ctrl_dt, substeps, ctrl_dt / substeps)
-    sensors, estimator = _estimator(sc, rng, cam_dt, vehicle.state.copy(), p.g, localizer)
+    sensors, estimator = _estimator(sc, rng, cam_dt, vehicle.state.copy(), p.g, localizer, redetect_every)
     result = fly(sc, vehicle, controller, estimator, sensors=sensors, seconds=duration, control_rate=control_rate,
                  substeps=substeps, rng=rng, progress=progress)
     result.motors["sigma"] = float(sigma)
@@ -241,7 +252,7 @@ def simulate(
 
 def fly(scenario: Scenario, vehicle: Vehicle, controller: Controller, estimator: TruthEstimator | VisionEstimator,
         *, sensors: VisionSensors | None = None, seconds: float | None = None, control_rate: float = 200.0,
-        substeps: int = 5, rng: np.random.Generator | None = None,
+        substeps: int = 1, rng: np.random.Generator | None = None,
         progress: Callable[[float], None] | None = None) -> SimResult:
     """Fly a scenario with the objects given: the closed loop of :func:`simulate` without
     building anything (RotorPy's ``simulate(world, vehicle, controller, ...)`` pattern).
@@ -269,7 +280,8 @@ def fly(scenario: Scenario, vehicle: Vehicle, controller: Controller, estimator:
     control_rate : float
         Controller / IMU rate, Hz (> 0).
     substeps : int
-        RK4 steps of the vehicle per control step (>= 1).
+        RK4 steps of the vehicle per control step (>= 1; 1 is :func:`simulate`'s default
+        without a motor lag).
     rng : numpy.random.Generator, optional
         Source of the gusts (default ``default_rng(0)``).
     progress : callable, optional
@@ -355,11 +367,13 @@ def fly(scenario: Scenario, vehicle: Vehicle, controller: Controller, estimator:
 
 
 def _estimator(sc: Scenario, rng: np.random.Generator, cam_dt: float, initial: FloatArray, g: float,
-               localizer: Callable | None) -> tuple[VisionSensors | None, TruthEstimator | VisionEstimator]:
+               localizer: Callable | None, redetect_every: int = 10
+               ) -> tuple[VisionSensors | None, TruthEstimator | VisionEstimator]:
     """The scenario's sensors (None: the controller sees the true state) and estimator."""
     if sc.estimator == "vision":
         sensors = VisionSensors(rng, cam_dt)
-        return sensors, VisionEstimator(sensors.camera, initial, g=g, localizer=localizer)
+        return sensors, VisionEstimator(sensors.camera, initial, g=g, localizer=localizer,
+                                        redetect_every=redetect_every)
     if sc.estimator == "truth":
         return None, TruthEstimator()
     raise ValueError(f"scenario.estimator: expected 'truth' or 'vision', got {sc.estimator!r}")

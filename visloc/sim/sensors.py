@@ -92,7 +92,7 @@ class BottomCamera:
     size : (int, int)
         Image ``(width, height)``; ``K`` is the AR.Drone 2.0 bottom camera scaled to it.
     noise_sigma : float
-        Sensor noise, grey levels.
+        Sensor noise, grey levels (drawn by OpenCV, seeded from ``rng``).
     rng : numpy.random.Generator
         Noise source.
 
@@ -125,7 +125,7 @@ class BottomCamera:
     def capture(self, state: FloatArray, R: FloatArray) -> NDArray[np.uint8]:
         """The image seen from ``state`` (raises ``ValueError`` if the view leaves the floor)."""
         return self.floor.render(self.K, self.size, self.pose(state, R),
-                                 noise_sigma=self.noise_sigma, rng=self.rng)
+                                 noise_sigma=self.noise_sigma, rng=self.rng, fast_noise=True)
 
     def body_from_map(self, T_cam_map: Pose) -> tuple[FloatArray, FloatArray]:
         """Inverse of :meth:`pose`: ``(position in A (3,), R body to A (3, 3))``."""

@@ -98,7 +98,7 @@ class FloorTexture:
 
     def render(self, K: NDArray, size: tuple[int, int], T_cam_map: Pose, *, supersample: int = 2,
                noise_sigma: float = 0.0, blur_sigma: float = 0.0,
-               rng: np.random.Generator | None = None) -> NDArray[np.uint8]:
+               rng: np.random.Generator | None = None, fast_noise: bool = False) -> NDArray[np.uint8]:
         """The floor seen by a pinhole camera at ``T_cam_map`` (above the floor, looking down).
 
         Parameters
@@ -115,6 +115,8 @@ class FloorTexture:
             Gaussian sensor noise (grey levels) and optical blur (px), >= 0.
         rng : numpy.random.Generator, optional
             Noise source.
+        fast_noise : bool
+            Draw the noise with OpenCV (:func:`visloc.synth.textures.degrade`).
 
         Returns
         -------
@@ -142,7 +144,7 @@ class FloorTexture:
         noise = check_number(noise_sigma, "noise_sigma", low=0.0)
         blur = check_number(blur_sigma, "blur_sigma", low=0.0)
         return degrade(img, rng if rng is not None else np.random.default_rng(), blur_sigma=blur,
-                       noise_sigma=noise)[0]
+                       noise_sigma=noise, fast_noise=bool(fast_noise))[0]
 
 
 def _warped(levels: tuple[NDArray[np.float32], ...], K: FloatArray, size: tuple[int, int], R: FloatArray,

@@ -1,0 +1,107 @@
+"""MarkerTracker: markers followed between full detections give a full detection's corners."""
+
+import numpy as np
+import pytest
+
+from visloc.markers import MarkerDetector, MarkerTracker
+from visloc.model.rigid_body import rotation_matrix
+from visloc.pose.maps import GridMap
+from visloc.sim import SIM_GRID, BottomCamera
+
+
+@pytest.fixture(scope="module")
+def flight():
+    """40 frames of the simulation's bottom camera over its marker grid, drifting, climbing,
+    rocking and turning (up to about 2 px of marker motion per frame)."""
+    cam = BottomCamera(GridMap(**SIM_GRID), "DICT_4X4_100", rng=np.random.default_rng(3))
+    frames = []
+    for k in range(40):
+        s = np.zeros(12)
+        s[0], s[1], s[2] = 0.05 * np.sin(k / 8), 0.004 * k, -1.0 - 0.1 * np.sin(k / 12)
+        s[6], s[8] = 0.02 * np.sin(k / 8), 0.004 * k
+        frames.append(cam.capture(s, rotation_matrix(s[6:9])))
+    return cam, frames
+
+
+def _by_id(dets):
+    return {d.id: d for d in dets}
+
+
+def test_followed_markers_have_the_detectors_corners(flight):
+    cam, frames = flight
+    detector = MarkerDetector(cam.dictionary, response="linear")
+    tracker = MarkerTracker(MarkerDetector(cam.dictionary, response="linear"), redetect_every=10)
+    followed = 0
+    for img in frames:
+        full, got = _by_id(detector.detect(img)), _by_id(tracker.detect(img))
+        assert set(got) <= set(full)  # nothing the detector would not find
+        assert len(got) >= 0.75 * len(full)  # markers come into view at the next full detection
+        for i, d in got.items():
+            assert np.abs(d.corners - full[i].corners).max() < 0.02
+            assert d.hamming == full[i].hamming
+        followed += len(got)
+    assert followed > 20 * len(frames)
+    assert tracker.frames == len(frames)
+    assert 4 <= tracker.full_detections <= 12  # every 10th frame, and when a marker is lost
+
+
+def test_redetect_every_frame_is_the_detector(flight):
+    cam, frames = flight
+    detector = MarkerDetector(cam.dictionary, response="linear")
+    tracker = MarkerTracker(detector, redetect_every=1)
+    for img in frames[:5]:
+        a, b = detector.detect(img), tracker.detect(img)
+        assert [d.id for d in a] == [d.id for d in b]
+        assert all(np.array_equal(x.corners, y.corners) for x, y in zip(a, b, strict=True))
+    assert tracker.full_detections == 5
+
+
+def test_a_lost_marker_brings_back_the_full_detection(flight):
+    cam, frames = flight
+    detector = MarkerDetector(cam.dictionary, response="linear")
+    tracker = MarkerTracker(detector, redetect_every=100)
+    first = tracker.detect(frames[0])
+    for f in frames[1:3]:
+        tracker.detect(f)
+    before = tracker.full_detections  # 1, or 2 if the zero-velocity guess of frame 1 was too far off
+    assert before <= 2
+    hidden = first[len(first) // 2]
+    img = frames[3].copy()
+    x0, y0 = np.floor(hidden.corners.min(axis=0)).astype(int) - 4
+    x1, y1 = np.ceil(hidden.corners.max(axis=0)).astype(int) + 4
+    img[max(y0, 0):y1, max(x0, 0):x1] = 128  # an occluder over one marker
+    got = tracker.detect(img)
+    assert tracker.full_detections == before + 1
+    assert [d.id for d in got] == [d.id for d in detector.detect(img)]
+    assert hidden.id not in {d.id for d in got}
+
+
+def test_confirm_wants_the_expected_id_and_orientation(flight):
+    cam, frames = flight
+    detector = MarkerDetector(cam.dictionary, response="linear")
+    dets = detector.detect(frames[0])
+    quads = np.array([d.corners for d in dets]) + 0.6  # a prediction half a pixel off
+    ids = np.array([d.id for d in dets])
+    got = detector.confirm(frames[0], quads, ids)
+    assert all(g is not None and np.abs(g.corners - d.corners).max() < 0.02 for g, d in zip(got, dets, strict=True))
+    assert all(g is None for g in detector.confirm(frames[0], quads, ids + 1))  # wrong ids
+    turned = np.roll(quads, 1, axis=1)  # corner 0 not the marker's own top-left
+    assert all(g is None for g in detector.confirm(frames[0], turned, ids))
+    assert detector.confirm(frames[0], np.zeros((0, 4, 2)), []) == []
+
+
+def test_bad_input_is_named():
+    detector = MarkerDetector("DICT_4X4_50")
+    with pytest.raises(TypeError, match="detector"):
+        MarkerTracker("DICT_4X4_50")
+    with pytest.raises(ValueError, match="redetect_every"):
+        MarkerTracker(detector, redetect_every=0)
+    with pytest.raises(ValueError, match="refine"):
+        MarkerTracker(MarkerDetector("DICT_4X4_50", refine=False))
+    img = np.full((60, 80), 255, np.uint8)
+    with pytest.raises(ValueError, match="quads"):
+        detector.confirm(img, np.zeros((2, 3, 2)), [1, 2])
+    with pytest.raises(ValueError, match="finite"):
+        detector.confirm(img, np.full((1, 4, 2), np.nan), [1])
+    with pytest.raises(ValueError):
+        MarkerTracker(detector).detect(np.zeros((0, 5), np.uint8))

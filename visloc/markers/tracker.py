@@ -1,0 +1,110 @@
+"""``MarkerTracker``: markers through a video, full detection only now and then.
+
+Between two frames of a video a marker moves little, so the search of stages 2-7 (blur,
+threshold, contours, corner fits) need not run on every frame: each marker of the previous
+frame is predicted to move on as it moved between the two frames before (each corner at
+constant velocity in the image), and its predicted quad goes straight to stages 8-10
+(:meth:`visloc.markers.MarkerDetector.confirm`). Stage 8 converges onto the marker's edges
+from anywhere within its profile half-width (about 0.4 cell), so the corners come out as a
+full detection's do; the cell read and dictionary match then vouch for the marker as they
+vouch for any candidate. A full detection runs every ``redetect_every`` frames (markers that
+came into view are found there), and on any frame on which a followed marker fails to
+confirm while its predicted quad lies inside the image (occlusion, a jerk that outran the
+prediction): that frame's markers are then exactly :meth:`~visloc.markers.MarkerDetector.detect`'s.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from visloc.markers.binarize import to_gray
+from visloc.markers.detector import MarkerDetector
+from visloc.types import MarkerDetection
+
+__all__ = ["MarkerTracker"]
+
+
+class MarkerTracker:
+    """Follow the markers of a video from frame to frame (module docstring).
+
+    Parameters
+    ----------
+    detector : MarkerDetector
+        The detector of the full detections and of the confirmations (its stage 8 must be on,
+        ``refine=True``).
+    redetect_every : int
+        A full detection at least every this many frames (>= 1; 1: every frame, the
+        detector alone).
+
+    Attributes
+    ----------
+    frames, full_detections : int
+        Frames seen, and those of them that ran a full detection.
+    """
+
+    def __init__(self, detector: MarkerDetector, *, redetect_every: int = 10) -> None:
+        if not isinstance(detector, MarkerDetector):
+            raise TypeError(f"detector: expected a MarkerDetector, got {type(detector).__name__}")
+        if not detector.params.refine:
+            raise ValueError("detector: a tracker needs stage 8 (refine=True) to follow markers")
+        if isinstance(redetect_every, bool) or int(redetect_every) != redetect_every or redetect_every < 1:
+            raise ValueError(f"redetect_every must be an integer >= 1, got {redetect_every!r}")
+        self.detector = detector
+        self.redetect_every = int(redetect_every)
+        self.frames = 0
+        self.full_detections = 0
+        self._since = 0  # frames since the last full detection
+        self._last: dict[tuple[int, bool], NDArray] = {}  # (id, inverted) -> corners (4, 2)
+        self._before: dict[tuple[int, bool], NDArray] = {}
+
+    def __repr__(self) -> str:
+        return f"MarkerTracker({self.detector!r}, redetect_every={self.redetect_every})"
+
+    def reset(self) -> None:
+        """Forget the markers followed so far: the next frame runs a full detection."""
+        self._last, self._before, self._since = {}, {}, 0
+
+    def detect(self, image: NDArray[np.uint8]) -> list[MarkerDetection]:
+        """The markers of the next frame of the video (uint8 grey or BGR), sorted by id."""
+        gray = to_gray(image)
+        self.frames += 1
+        dets = self._follow(gray) if self._last and self._since < self.redetect_every - 1 else None
+        if dets is None:
+            dets = self.detector.detect(gray)
+            self.full_detections += 1
+            self._since = 0
+        else:
+            self._since += 1
+        now = {(d.id, d.inverted): d.corners for d in dets}
+        self._before, self._last = self._last, now
+        return dets
+
+    def _follow(self, gray: NDArray[np.uint8]) -> list[MarkerDetection] | None:
+        """The followed markers confirmed in ``gray``; None if one inside the image failed or
+        none is left inside."""
+        h, w = gray.shape[:2]
+        margin = self.detector.params.candidates.border_distance + 1.0
+        dets: list[MarkerDetection] = []
+        for inverted in (False, True):
+            keys = [k for k in self._last if k[1] is inverted]
+            if not keys:
+                continue
+            quads = np.array([self._predicted(k) for k in keys])
+            inside = ((quads >= margin) & (quads <= np.array([w - 1, h - 1]) - margin)).all(axis=(1, 2))
+            if not inside.any():
+                continue
+            got = self.detector.confirm(gray, quads[inside], np.array([k[0] for k in keys])[inside],
+                                        inverted=inverted)
+            if any(d is None for d in got):
+                return None
+            dets.extend(got)  # type: ignore[arg-type]
+        if not dets:
+            return None
+        return sorted(dets, key=lambda d: (d.id, d.corners[0, 1], d.corners[0, 0]))
+
+    def _predicted(self, key: tuple[int, bool]) -> NDArray:
+        """Where a followed marker's corners should be now: on at the velocity of its last step."""
+        last = self._last[key]
+        before = self._before.get(key)
+        return last if before is None else 2.0 * last - before

@@ -13,7 +13,15 @@ a harder set with more blur, motion blur, noise and dim light:
   CORNER_REFINE_SUBPIX.
 
 Timing is interleaved per frame (detection + pose), several rounds. A failure is no pose, or a
-position more than 5 cm off. Usage: ``python bench/localize.py [--quick]``; writes
+position more than 5 cm off.
+
+``grid flight``: a 30 fps video of a smooth flight over the same grid (``render_map_flight``,
+up to 0.4 m/s, 0.8-1.3 m up, roll and pitch up to 0.1 rad; the clean set's camera), where each
+method reads the frames in order, whole video by whole video, the order of the methods turned
+round every round; ``visloc_tracker`` is ``MarkerTracker`` (the full search every 10th frame,
+the markers of the last frames followed between) + the same joint pose. Besides the median
+time per frame, the mean (the tracker's full searches are its slowest frames) and the markers
+used per frame. Usage: ``python bench/localize.py [--quick]``; writes
 ``bench/results/localize.json`` and ``localize.md``.
 """
 
@@ -29,12 +37,12 @@ import numpy as np
 from _results import write_results
 from scipy.spatial.transform import Rotation
 
-from visloc.markers import MarkerDetector
+from visloc.markers import MarkerDetector, MarkerTracker
 from visloc.pose import Camera
 from visloc.pose.map_pose import estimate_camera_pose
 from visloc.pose.maps import GridMap
 from visloc.synth.camera import CameraEffects
-from visloc.synth.grid import FLIGHT_CAMERA, random_map_view
+from visloc.synth.grid import FLIGHT_CAMERA, random_map_view, render_map_flight
 
 ROOT = Path(__file__).resolve().parents[1]
 K = np.array([[320.067, 0, 159.5], [0, 320.067, 119.5], [0, 0, 1]])
@@ -55,13 +63,16 @@ def methods(grid):
         dets = vl.detect(img)
         run_visloc.detect_s.append(time.perf_counter() - t0)
         mp = estimate_camera_pose(dets, grid, cam)
+        run_visloc.markers.append(len(dets))
         return None if mp is None else (mp.pose.R, mp.pose.t)
 
     run_visloc.detect_s = []  # the detection's share of each call (the rest is the joint pose)
+    run_visloc.markers = []
 
     def run_cv(det):
         def f(img):
             corners, ids, _ = det.detectMarkers(img)
+            f.markers.append(0 if ids is None else len(ids))
             if ids is None:
                 return None
             obj = np.concatenate([grid.corners_of(int(i)) for i in ids.ravel() if int(i) in grid])
@@ -70,9 +81,78 @@ def methods(grid):
                 return None
             ok, rvec, tvec = cv2.solvePnP(obj, img_pts.astype(np.float64), K, None, flags=cv2.SOLVEPNP_ITERATIVE)
             return (cv2.Rodrigues(rvec)[0], tvec.ravel()) if ok else None
+        f.markers = []
         return f
 
     return {"visloc": run_visloc, "opencv": run_cv(cv_default), "opencv_subpix": run_cv(cv_subpix)}
+
+
+def _tracked(grid):
+    """visloc with :class:`MarkerTracker` (a new tracker per pass over the video)."""
+    cam = Camera(K, size=(320, 240))
+    detector = MarkerDetector("DICT_4X4_50")
+
+    def f(img):
+        dets = f.tracker.detect(img)
+        f.markers.append(len(dets))
+        mp = estimate_camera_pose(dets, grid, cam)
+        return None if mp is None else (mp.pose.R, mp.pose.t)
+
+    f.start = lambda: setattr(f, "tracker", MarkerTracker(detector, redetect_every=10))
+    f.markers = []
+    return f
+
+
+def _errors(truth, out) -> dict:
+    """Failures and position / rotation errors of poses ``out`` against ``truth`` [(C, R_cam_map)]."""
+    pos_err, rot_err, fails = [], [], 0
+    for (C, R_true), res in zip(truth, out, strict=True):
+        if res is None:
+            fails += 1
+            continue
+        R, t = res
+        e = float(np.linalg.norm(-R.T @ t - C))
+        if e > FAIL_M:
+            fails += 1
+            continue
+        pos_err.append(e)
+        rot_err.append(float(np.degrees(Rotation.from_matrix(R @ R_true.T).magnitude())))
+    return {"failures": fails,
+            "pos_err_median_mm": 1e3 * float(np.median(pos_err)) if pos_err else None,
+            "pos_err_p90_mm": 1e3 * float(np.percentile(pos_err, 90)) if pos_err else None,
+            "rot_err_median_deg": float(np.median(rot_err)) if rot_err else None}
+
+
+def run_flight(seconds, rounds):
+    """The methods over one rendered 30 fps flight, each reading the frames in order."""
+    grid = GridMap(6, 6, 0.10, 0.05)
+    flight = render_map_flight(seconds, 30.0, grid, seed=5, imu_rate=None, background="gravel",
+                               camera=FLIGHT_CAMERA)
+    truth = []
+    for k in range(len(flight.frames)):
+        R_world_cam, C = flight.track.pose(k)
+        truth.append((C, R_world_cam.T))
+    ms = methods(grid)
+    ms["visloc_tracker"] = _tracked(grid)
+    times = {m: [] for m in ms}
+    out = {}
+    for r in range(rounds):
+        for m in (list(ms) if r % 2 == 0 else list(ms)[::-1]):
+            if hasattr(ms[m], "start"):
+                ms[m].start()
+            got = []
+            for img in flight.frames:
+                t0 = time.perf_counter()
+                got.append(ms[m](img))
+                times[m].append(time.perf_counter() - t0)
+            out.setdefault(m, got)
+    stats = {}
+    for m in ms:
+        stats[m] = {"ms_median": 1e3 * float(np.median(times[m])), "ms_mean": 1e3 * float(np.mean(times[m])),
+                    **_errors(truth, out[m])}
+        if hasattr(ms[m], "markers"):
+            stats[m]["markers_per_frame"] = float(np.mean(ms[m].markers))
+    return {"frames": len(flight.frames), "stats": stats}
 
 
 def run(n, rounds, hard):
@@ -95,23 +175,9 @@ def run(n, rounds, hard):
                     out[m][k] = res
     stats = {}
     detect_ms = 1e3 * float(np.median(ms["visloc"].detect_s))
+    truth = [(v.position, v.T_cam_map.R) for v in views]
     for m in ms:
-        pos_err, rot_err, fails = [], [], 0
-        for v, res in zip(views, out[m], strict=True):
-            if res is None:
-                fails += 1
-                continue
-            R, t = res
-            e = float(np.linalg.norm(-R.T @ t - v.position))
-            if e > FAIL_M:
-                fails += 1
-                continue
-            pos_err.append(e)
-            rot_err.append(float(np.degrees(Rotation.from_matrix(R @ v.T_cam_map.R.T).magnitude())))
-        stats[m] = {"ms_median": 1e3 * float(np.median(times[m])), "failures": fails,
-                    "pos_err_median_mm": 1e3 * float(np.median(pos_err)) if pos_err else None,
-                    "pos_err_p90_mm": 1e3 * float(np.percentile(pos_err, 90)) if pos_err else None,
-                    "rot_err_median_deg": float(np.median(rot_err)) if rot_err else None}
+        stats[m] = {"ms_median": 1e3 * float(np.median(times[m])), **_errors(truth, out[m])}
     return {"frames": n, "stats": stats, "visloc_detect_ms_median": detect_ms}
 
 
@@ -146,12 +212,21 @@ def markdown(result) -> str:
     lines = []
     for name, res in result["sets"].items():
         base = res["stats"]["opencv"]["ms_median"]
-        lines.append(f"\n**{name}** ({res['frames']} frames, 320x240)\n")
-        lines.append("| method | ms/frame | ratio | failures | position err median mm | p90 mm | rotation err median deg |")
-        lines.append("|---|---|---|---|---|---|---|")
+        video = "ms_mean" in res["stats"]["opencv"]
+        lines.append(f"\n**{name}** ({res['frames']} frames, 320x240{', in order' if video else ''})\n")
+        if video:
+            lines.append("| method | ms/frame median | ratio | ms/frame mean | ratio | markers/frame | failures | "
+                         "position err median mm | p90 mm | rotation err median deg |")
+            lines.append("|---|---|---|---|---|---|---|---|---|---|")
+        else:
+            lines.append("| method | ms/frame | ratio | failures | position err median mm | p90 mm | "
+                         "rotation err median deg |")
+            lines.append("|---|---|---|---|---|---|---|")
         for m, s in res["stats"].items():
             f = (lambda v, d=2: "–" if v is None else f"{v:.{d}f}")
-            lines.append(f"| {m} | {f(s['ms_median'])} | {f(s['ms_median'] / base)} | {s['failures']} | "
+            mean = (f"{f(s['ms_mean'])} | {f(s['ms_mean'] / res['stats']['opencv']['ms_mean'])} | "
+                    f"{f(s.get('markers_per_frame'), 1)} | ") if video else ""
+            lines.append(f"| {m} | {f(s['ms_median'])} | {f(s['ms_median'] / base)} | {mean}{s['failures']} | "
                          f"{f(s['pos_err_median_mm'])} | {f(s['pos_err_p90_mm'])} | {f(s['rot_err_median_deg'], 3)} |")
         if "visloc_detect_ms_median" in res:
             lines.append(f"\nvisloc's time: marker detection {res['visloc_detect_ms_median']:.2f} ms (median), "
@@ -174,7 +249,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(ROOT / "bench/results"))
     args = ap.parse_args(argv)
     n = 15 if args.quick else 100
-    result = {"sets": {"grid clean": run(n, args.rounds, False), "grid hard": run(n, args.rounds, True)},
+    result = {"sets": {"grid clean": run(n, args.rounds, False), "grid hard": run(n, args.rounds, True),
+                       "grid flight": run_flight(2.0 if args.quick else 10.0, args.rounds)},
               "attitude": attitude(1.0 if args.quick else 10.0)}
     write_results(args.out, "localize", result, markdown(result))
     return 0

@@ -380,6 +380,9 @@ def _add_sim(sub: argparse._SubParsersAction) -> None:
                          "(default 20 with --sigma > 0, else 0)")
     sm.add_argument("--camera-rate", type=_positive, default=30.0, metavar="HZ",
                     help="bottom-camera rate for hover-vision (default 30)")
+    sm.add_argument("--redetect-every", type=_count, default=10, metavar="N",
+                    help="vision scenarios: a full marker detection every N camera frames, the markers followed "
+                         "between (default 10; 1: the full detection on every frame)")
     sm.add_argument("--motor-lag", type=float, default=0.0, metavar="S",
                     help="first-order motor time constant, s (report eq. 2.13; default 0)")
     sm.add_argument("--out", metavar="RUN.csv", help="write time, state, estimate, set point, pwm per control step")
@@ -425,6 +428,11 @@ def _detector_arguments(p: argparse.ArgumentParser) -> None:
                    help="width of the markers' black border in cells (default 1)")
     p.add_argument("--inverted", default="no", choices=("no", "yes", "both"),
                    help="white-on-black markers: no (default), yes (only those), both")
+    p.add_argument("--redetect-every", type=_count, default=1, metavar="N",
+                   help="videos: the full marker search every Nth frame only, the markers of the last frames "
+                        "followed between (confirmed by the edge refinement and the cell read; a full search "
+                        "whenever one is lost); markers coming into view wait for the next full search "
+                        "(default 1: every frame)")
 
 
 #: sub-command -> (module of visloc.commands, function)

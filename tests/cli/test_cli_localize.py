@@ -3,6 +3,7 @@
 import csv
 
 import numpy as np
+import pytest
 
 from visloc.cli import main
 
@@ -26,6 +27,30 @@ def test_localize_a_rendered_flight(tmp_path, capsys):
     assert np.median(np.linalg.norm(v - true_v, axis=1)) < 0.05
     assert "median position error" in capsys.readouterr().err
     assert (tmp_path / "l.rrd").stat().st_size > 0
+
+
+def test_localize_following_the_markers_between_full_searches(tmp_path):
+    # --redetect-every 5: the fixes of the full search on every frame, within a twentieth of their
+    # error from the truth (markers coming into view join at the next full search)
+    src = tmp_path / "flight"
+    assert main(["render", "localize", str(src), "--seconds", "0.5", "--fps", "30", "--seed", "3"]) == 0
+    rows = {}
+    for every in ("1", "5"):
+        out = tmp_path / f"est{every}.csv"
+        assert main(["localize", str(src), "--camera", str(src / "camera.yml"), "--map", str(src / "map.yml"),
+                     "--dict", "DICT_4X4_100", "--fps", "30", "--out", str(out), "--redetect-every", every,
+                     "--truth", str(src / "ground_truth.csv"), "--quiet"]) == 0
+        with open(out, newline="") as fh:
+            rows[every] = list(csv.DictReader(fh))
+    full, followed = rows["1"], rows["5"]
+    assert len(full) == len(followed) == 15 and all(r["fix"] == "used" for r in full + followed)
+    xyz = [[[float(r[k]) for k in ("x", "y", "z")] for r in rs] for rs in (full, followed)]
+    assert np.abs(np.array(xyz[0]) - np.array(xyz[1])).max() < 1e-4
+    assert all(np.median([float(r["error_m"]) for r in rs]) < 0.002 for rs in (full, followed))
+    with pytest.raises(SystemExit) as stop:  # argparse's own check
+        main(["localize", str(src), "--camera", str(src / "camera.yml"), "--map", str(src / "map.yml"),
+              "--fps", "30", "--redetect-every", "0"])
+    assert stop.value.code == 2
 
 
 def test_localize_needs_fps_for_folders_and_a_valid_map(tmp_path, capsys):

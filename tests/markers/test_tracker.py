@@ -56,7 +56,16 @@ def test_redetect_every_frame_is_the_detector(flight):
     assert tracker.full_detections == 5
 
 
-def test_a_lost_marker_brings_back_the_full_detection(flight):
+def _occlude(img, quads):
+    out = img.copy()
+    for q in quads:
+        x0, y0 = np.floor(q.min(axis=0)).astype(int) - 4
+        x1, y1 = np.ceil(q.max(axis=0)).astype(int) + 4
+        out[max(y0, 0):y1, max(x0, 0):x1] = 128  # an occluder over the marker
+    return out
+
+
+def test_a_lost_marker_is_dropped_and_many_bring_back_the_full_detection(flight):
     cam, frames = flight
     detector = MarkerDetector(cam.dictionary, response="linear")
     tracker = MarkerTracker(detector, redetect_every=100)
@@ -66,14 +75,13 @@ def test_a_lost_marker_brings_back_the_full_detection(flight):
     before = tracker.full_detections  # 1, or 2 if the zero-velocity guess of frame 1 was too far off
     assert before <= 2
     hidden = first[len(first) // 2]
-    img = frames[3].copy()
-    x0, y0 = np.floor(hidden.corners.min(axis=0)).astype(int) - 4
-    x1, y1 = np.ceil(hidden.corners.max(axis=0)).astype(int) + 4
-    img[max(y0, 0):y1, max(x0, 0):x1] = 128  # an occluder over one marker
-    got = tracker.detect(img)
+    got = tracker.detect(_occlude(frames[3], [hidden.corners]))
+    assert tracker.full_detections == before  # one marker lost: dropped, the others followed
+    assert hidden.id not in {d.id for d in got} and len(got) >= len(first) - 3
+    img = _occlude(frames[4], [d.corners for d in got[: len(got) // 2]])
+    got = tracker.detect(img)  # half of them lost: the full search
     assert tracker.full_detections == before + 1
     assert [d.id for d in got] == [d.id for d in detector.detect(img)]
-    assert hidden.id not in {d.id for d in got}
 
 
 def test_confirm_wants_the_expected_id_and_orientation(flight):
@@ -96,6 +104,8 @@ def test_bad_input_is_named():
         MarkerTracker("DICT_4X4_50")
     with pytest.raises(ValueError, match="redetect_every"):
         MarkerTracker(detector, redetect_every=0)
+    with pytest.raises(ValueError, match="keep"):
+        MarkerTracker(detector, keep=0.0)
     with pytest.raises(ValueError, match="refine"):
         MarkerTracker(MarkerDetector("DICT_4X4_50", refine=False))
     img = np.full((60, 80), 255, np.uint8)

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
 
 import numpy as np
 from tqdm import tqdm
 
-from visloc.markers import FAST_PASSES, MarkerDetector
+from visloc.markers import FAST_PASSES, MarkerDetector, MarkerTracker
 from visloc.pose import Camera
 from visloc.types import MarkerDetection, Pose
 
@@ -45,6 +46,14 @@ def detector_for(args: argparse.Namespace) -> MarkerDetector:
     if args.fast:
         options["passes"] = FAST_PASSES
     return MarkerDetector(args.dict, **options)
+
+
+def finder_for(detector: MarkerDetector, args: argparse.Namespace) -> Callable[[np.ndarray], list[MarkerDetection]]:
+    """What finds the markers of each frame in turn: ``detector.detect``, or with
+    ``--redetect-every N`` (N > 1) a :class:`visloc.markers.MarkerTracker`'s ``detect`` (the
+    full search every Nth frame, the markers of the last frames followed between)."""
+    every = getattr(args, "redetect_every", 1)
+    return MarkerTracker(detector, redetect_every=every).detect if every > 1 else detector.detect
 
 def frames_of(source, args: argparse.Namespace):
     """The frames of an open source with a progress bar (unless ``--quiet``), stopping after

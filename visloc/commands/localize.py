@@ -13,6 +13,7 @@ from visloc.commands._common import (
     camera_for,
     detector_for,
     dictionary_for,
+    finder_for,
     finite_rows,
     frames_of,
     imu_input,
@@ -89,7 +90,7 @@ def localize(args: argparse.Namespace) -> int:
 
     mmap = MarkerMap.from_file(args.map)
     dictionary_for(args, "localize", mmap)
-    detector = detector_for(args)
+    find = finder_for(detector_for(args), args)
     camera = Camera.from_file(args.camera)
     truth = None
     if args.truth:
@@ -118,7 +119,7 @@ def localize(args: argparse.Namespace) -> int:
                     out.write(row | {"fix": "unreadable"})
                 continue
             cam = camera_for(camera, frame.image.shape, warned, "localize")
-            mp = estimate_camera_pose(detector.detect(frame.image), mmap, cam)
+            mp = estimate_camera_pose(find(frame.image), mmap, cam)
             force = None
             if imu is not None and R_map_cam is not None and last_t is not None:
                 # mean specific force over the interval (camera axes), turned into the map frame
@@ -219,7 +220,7 @@ def track(args: argparse.Namespace) -> int:
     body = MarkerMap.from_file(args.body)
     reference = MarkerMap.from_file(args.reference)
     dictionary_for(args, "track", body, reference)
-    detector = detector_for(args)
+    find = finder_for(detector_for(args), args)
     camera = Camera.from_file(args.camera)
     target = None
     if args.udp:
@@ -245,7 +246,7 @@ def track(args: argparse.Namespace) -> int:
                 rec["error"] = frame.error
             else:
                 cam = camera_for(camera, frame.image.shape, warned, "track")
-                bp = track_body(detector.detect(frame.image), body, reference, cam)
+                bp = track_body(find(frame.image), body, reference, cam)
                 dt = None if last_time is None else frame.time - last_time
                 if dt is not None and not dt > 0:
                     raise UsageError(f"frame times must increase; {frame.name} is at {frame.time} s")

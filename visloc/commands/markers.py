@@ -15,6 +15,7 @@ from visloc.commands._common import (
     camera_for,
     detector_for,
     dictionary_for,
+    finder_for,
     frames_of,
     marker_records,
     warn,
@@ -41,6 +42,7 @@ def detect(args: argparse.Namespace) -> int:
         Exit status: 0; 1 when some frames could not be read (each named on a warning line).
     """
     detector = detector_for(args)
+    find = finder_for(detector, args)
     camera = Camera.from_file(args.camera) if args.camera else None
     if (camera is None) != (args.marker_length is None):
         raise UsageError("poses need both --camera FILE and --marker-length M")
@@ -76,7 +78,7 @@ def detect(args: argparse.Namespace) -> int:
                 dets = trace.detections
                 write_explain(trace, explain_dir, stem=f"frame_{frame.index:06d}")
             else:
-                dets = detector.detect(frame.image)
+                dets = find(frame.image)
             poses = None
             cam = None
             if camera is not None:

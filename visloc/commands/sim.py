@@ -72,6 +72,7 @@ def sim(args: argparse.Namespace) -> int:
     try:
         result = simulate(scenario, sigma=args.sigma, seed=args.seed, seconds=args.seconds,
                           camera_rate=args.camera_rate, motor_lag=args.motor_lag, warmup=args.warmup,
+                          redetect_every=args.redetect_every,
                           max_tilt=math.inf if args.unbounded else 0.3,
                           progress=(lambda _t: bar.update(1)) if bar is not None else None)
     finally:

@@ -172,7 +172,7 @@ def sample_cells(gray: NDArray[np.uint8], quads: NDArray, n: int, *, per_side: i
     uv1 = _GRIDS[n, per_side]  # (3, P): u, v, 1
     mx, my = _map_points(q, uv1)
     raw = cv2.remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).reshape(len(q), -1, m)
-    vals = raw.sum(axis=2, dtype=np.float64) / m
+    vals = raw.sum(axis=2, dtype=np.uint32) / m  # whole sums: float64's, in two thirds of the time
     samples = raw[:, : n * n].reshape(len(q), n, n, m)
     return CellSample(vals[:, : n * n].reshape(-1, n, n), vals[:, n * n :], samples)
 
@@ -278,9 +278,10 @@ def cell_white_fractions(gray: NDArray[np.uint8], quads: NDArray, n: int, thresh
     rows = (32000 // side) * side
     vals = np.concatenate([cv2.remap(gray, mx[a : a + rows], my[a : a + rows], cv2.INTER_LINEAR,
                                      borderMode=cv2.BORDER_REPLICATE) for a in range(0, len(mx), rows)])
-    vals = vals.reshape(len(q), n, per_side, n, per_side)
-    white = vals > np.asarray(threshold, np.float64).reshape(-1, 1, 1, 1, 1)
-    return white.mean(axis=(2, 4))
+    white = vals.reshape(len(q), -1) > np.asarray(threshold, np.float64).reshape(-1, 1)
+    # the count of each cell's samples, one axis at a time (a third of mean(axis=(2, 4))'s time)
+    count = white.view(np.uint8).reshape(len(q), n, per_side, side).sum(axis=2, dtype=np.uint32)
+    return count.reshape(len(q), n, n, per_side).sum(axis=3) / (per_side * per_side)
 
 
 def otsu_threshold(values: NDArray) -> tuple[NDArray, NDArray, NDArray]:

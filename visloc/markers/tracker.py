@@ -3,14 +3,17 @@
 Between two frames of a video a marker moves little, so the search of stages 2-7 (blur,
 threshold, contours, corner fits) need not run on every frame: each marker of the previous
 frame is predicted to move on as it moved between the two frames before (each corner at
-constant velocity in the image), and its predicted quad goes straight to stages 8-10
+constant velocity in the image; a marker first found in the previous frame by the affine
+motion of the others' last step), and its predicted quad goes straight to stages 8-10
 (:meth:`visloc.markers.MarkerDetector.confirm`). Stage 8 converges onto the marker's edges
 from anywhere within its profile half-width (about 0.4 cell), so the corners come out as a
 full detection's do; the cell read and dictionary match then vouch for the marker as they
-vouch for any candidate. A full detection runs every ``redetect_every`` frames (markers that
-came into view are found there), and on any frame on which a followed marker fails to
-confirm while its predicted quad lies inside the image (occlusion, a jerk that outran the
-prediction): that frame's markers are then exactly :meth:`~visloc.markers.MarkerDetector.detect`'s.
+vouch for any candidate. A marker that fails (occluded, or its guess too far off: a marker
+that has just come into view) is dropped until a full detection finds it again. A full
+detection runs every ``redetect_every`` frames (markers that came into view are found there),
+and on any frame on which fewer than ``keep`` of the followed markers whose predicted quads lie
+inside the image confirm (a jerk that outran the prediction): that frame's markers are then
+exactly :meth:`~visloc.markers.MarkerDetector.detect`'s.
 """
 
 from __future__ import annotations
@@ -36,6 +39,9 @@ class MarkerTracker:
     redetect_every : int
         A full detection at least every this many frames (>= 1; 1: every frame, the
         detector alone).
+    keep : float
+        Least share of the followed markers inside the image that must confirm, in (0, 1];
+        below it the frame runs a full detection (1: any failure does).
 
     Attributes
     ----------
@@ -43,15 +49,18 @@ class MarkerTracker:
         Frames seen, and those of them that ran a full detection.
     """
 
-    def __init__(self, detector: MarkerDetector, *, redetect_every: int = 10) -> None:
+    def __init__(self, detector: MarkerDetector, *, redetect_every: int = 10, keep: float = 0.75) -> None:
         if not isinstance(detector, MarkerDetector):
             raise TypeError(f"detector: expected a MarkerDetector, got {type(detector).__name__}")
         if not detector.params.refine:
             raise ValueError("detector: a tracker needs stage 8 (refine=True) to follow markers")
         if isinstance(redetect_every, bool) or int(redetect_every) != redetect_every or redetect_every < 1:
             raise ValueError(f"redetect_every must be an integer >= 1, got {redetect_every!r}")
+        if isinstance(keep, bool) or not isinstance(keep, (int, float)) or not 0.0 < keep <= 1.0:
+            raise ValueError(f"keep must be a number in (0, 1], got {keep!r}")
         self.detector = detector
         self.redetect_every = int(redetect_every)
+        self.keep = float(keep)
         self.frames = 0
         self.full_detections = 0
         self._since = 0  # frames since the last full detection
@@ -59,7 +68,7 @@ class MarkerTracker:
         self._before: dict[tuple[int, bool], NDArray] = {}
 
     def __repr__(self) -> str:
-        return f"MarkerTracker({self.detector!r}, redetect_every={self.redetect_every})"
+        return f"MarkerTracker({self.detector!r}, redetect_every={self.redetect_every}, keep={self.keep})"
 
     def reset(self) -> None:
         """Forget the markers followed so far: the next frame runs a full detection."""
@@ -81,30 +90,43 @@ class MarkerTracker:
         return dets
 
     def _follow(self, gray: NDArray[np.uint8]) -> list[MarkerDetection] | None:
-        """The followed markers confirmed in ``gray``; None if one inside the image failed or
-        none is left inside."""
+        """The followed markers confirmed in ``gray``; None if fewer than ``keep`` of those
+        inside the image confirmed, or none did."""
         h, w = gray.shape[:2]
         margin = self.detector.params.candidates.border_distance + 1.0
         dets: list[MarkerDetection] = []
+        tried = 0
         for inverted in (False, True):
             keys = [k for k in self._last if k[1] is inverted]
             if not keys:
                 continue
-            quads = np.array([self._predicted(k) for k in keys])
+            quads = self._predicted(keys)
             inside = ((quads >= margin) & (quads <= np.array([w - 1, h - 1]) - margin)).all(axis=(1, 2))
             if not inside.any():
                 continue
             got = self.detector.confirm(gray, quads[inside], np.array([k[0] for k in keys])[inside],
                                         inverted=inverted)
-            if any(d is None for d in got):
-                return None
-            dets.extend(got)  # type: ignore[arg-type]
-        if not dets:
+            tried += len(got)
+            dets.extend(d for d in got if d is not None)
+        if not dets or len(dets) < self.keep * tried:
             return None
         return sorted(dets, key=lambda d: (d.id, d.corners[0, 1], d.corners[0, 0]))
 
-    def _predicted(self, key: tuple[int, bool]) -> NDArray:
-        """Where a followed marker's corners should be now: on at the velocity of its last step."""
-        last = self._last[key]
-        before = self._before.get(key)
-        return last if before is None else 2.0 * last - before
+    def _predicted(self, keys: list[tuple[int, bool]]) -> NDArray:
+        """Where followed markers' corners (K, 4, 2) should be now: on at the velocity of their
+        last step; a marker found only in the last frame moves by the affine motion that took
+        the others' corners through their last step (least squares; fewer than two others: it
+        stays)."""
+        last = np.array([self._last[k] for k in keys])
+        seen = np.array([k in self._before for k in keys])
+        if not seen.any():
+            return last
+        before = np.array([self._before[k] for k, s in zip(keys, seen, strict=True) if s])
+        pred = last.copy()
+        pred[seen] = 2.0 * last[seen] - before
+        if not seen.all() and seen.sum() >= 2:
+            a = before.reshape(-1, 2)
+            affine = np.linalg.lstsq(np.hstack([a, np.ones((len(a), 1))]), last[seen].reshape(-1, 2), rcond=None)[0]
+            new = last[~seen].reshape(-1, 2)
+            pred[~seen] = (np.hstack([new, np.ones((len(new), 1))]) @ affine).reshape(-1, 4, 2)
+        return pred

@@ -26,6 +26,19 @@ def render_square(size=(120, 100), corners=None, supersample=8, dark=30, bright=
     return np.clip(np.round(img), 0, 255).astype(np.uint8)
 
 
+def pytest_addoption(parser):
+    parser.addoption("--runslow", action="store_true",
+                     help="also run tests/sweeps: the issues' must-reach accuracy figures, measured by the benches "
+                          "(about two minutes on two cores)")
+
+
+def pytest_ignore_collect(collection_path, config):
+    """tests/sweeps is collected only with ``--runslow``."""
+    if "sweeps" in collection_path.parts and not config.getoption("--runslow"):
+        return True
+    return None
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)

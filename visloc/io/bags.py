@@ -163,10 +163,9 @@ def _compressed_payload(raw: bytes, ros2: bool) -> tuple[int, memoryview] | None
     caller deserialises them with rosbags)."""
     view = memoryview(raw)
     n = len(view)
-    if n < 20 or (ros2 and (view[0] != 0 or view[1] != 1)):  # CDR: little-endian encapsulation only
+    stamp = _raw_stamp(view, ros2)
+    if stamp is None or n < 20:
         return None
-    # the stamp (sec, nanosec) follows ROS 1's seq or CDR's encapsulation header alike
-    sec, nsec = struct.unpack_from("<II", view, 4)
     pos = 12
     for _ in range(2):  # the strings frame_id and format: a length, the bytes (CDR: a NUL, then aligned to 4)
         if pos + 4 > n:
@@ -179,7 +178,17 @@ def _compressed_payload(raw: bytes, ros2: bool) -> tuple[int, memoryview] | None
     size = struct.unpack_from("<I", view, pos)[0]
     if pos + 4 + size != n:
         return None
-    return sec * 1_000_000_000 + nsec, view[pos + 4 :]
+    return stamp, view[pos + 4 :]
+
+
+def _raw_stamp(view: memoryview, ros2: bool) -> int | None:
+    """The header stamp (ns) of a serialised image message, read in place: ``(sec, nanosec)``
+    follows ROS 1's ``seq`` or CDR's encapsulation header alike; None when the bytes are too
+    short or not little-endian CDR."""
+    if len(view) < 12 or (ros2 and (view[0] != 0 or view[1] != 1)):
+        return None
+    sec, nsec = struct.unpack_from("<II", view, 4)
+    return sec * 1_000_000_000 + nsec
 
 
 class BagSource(FrameSource):
@@ -248,8 +257,14 @@ class BagSource(FrameSource):
 
 
 def _first_stamp(reader, conns) -> int:
-    """The stamp (ns) of the first message of ``conns`` (0 when there is none)."""
+    """The stamp (ns) of the first message of ``conns`` (0 when there is none), its log time
+    where the stamp is zero. Read in place from the message's bytes (the image messages begin
+    with their header): building a message object first costs the reader its (de)serialisers'
+    code generation, about 10 ms."""
     for conn, log_ns, raw in reader.messages(connections=conns):
+        ns = _raw_stamp(memoryview(raw), reader.is2)
+        if ns is not None:
+            return ns if ns > 0 else int(log_ns)
         try:
             return _stamp(reader.deserialize(raw, conn.msgtype), log_ns)
         except Exception:  # noqa: BLE001 - a bad first message: its log time

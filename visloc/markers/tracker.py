@@ -13,7 +13,8 @@ that has just come into view) is dropped until a full detection finds it again. 
 detection runs every ``redetect_every`` frames (markers that came into view are found there),
 and on any frame on which fewer than ``keep`` of the followed markers whose predicted quads lie
 inside the image confirm (a jerk that outran the prediction): that frame's markers are then
-exactly :meth:`~visloc.markers.MarkerDetector.detect`'s.
+exactly :meth:`~visloc.markers.MarkerDetector.detect`'s. A followed marker is known by its id
+(and polarity): an id printed twice in view is followed once between full detections.
 """
 
 from __future__ import annotations

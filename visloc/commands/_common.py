@@ -55,6 +55,7 @@ def finder_for(detector: MarkerDetector, args: argparse.Namespace) -> Callable[[
     every = getattr(args, "redetect_every", 1)
     return MarkerTracker(detector, redetect_every=every).detect if every > 1 else detector.detect
 
+
 def frames_of(source, args: argparse.Namespace):
     """The frames of an open source with a progress bar (unless ``--quiet``), stopping after
     ``--max-frames``; with ``--frame-range START:STOP`` only the frames whose index is in

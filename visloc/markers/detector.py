@@ -415,9 +415,10 @@ class MarkerDetector:
 
         Each quad is refined on the grey image (stage 8 converges onto the marker's edges
         from within its profile half-width, about 0.4 cell), read and matched against the
-        dictionary exactly as a candidate of :meth:`detect` is; it stands only if the
-        refinement succeeded and the marker decodes to the expected id with its own top-left
-        corner at the quad's corner 0.
+        dictionary as a candidate of :meth:`detect` is (less the second read through the
+        stage-7 corners: a prediction is no fit); it stands only if the refinement succeeded
+        and the marker decodes to the expected id with its own top-left corner at the quad's
+        corner 0.
 
         Parameters
         ----------
@@ -434,6 +435,12 @@ class MarkerDetector:
         -------
         list of MarkerDetection or None
             Per quad, the detection (``rotation`` 0: no contour was followed) or None.
+
+        Raises
+        ------
+        ValueError
+            ``quads`` not (K, 4, 2) finite corners with K ``ids``; an image that is not
+            uint8 grey or BGR.
         """
         q = np.asarray(quads, dtype=np.float64)
         want = np.asarray(ids).reshape(-1)

@@ -19,6 +19,8 @@ exactly :meth:`~visloc.markers.MarkerDetector.detect`'s. A followed marker is kn
 
 from __future__ import annotations
 
+import numbers
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -55,7 +57,7 @@ class MarkerTracker:
             raise TypeError(f"detector: expected a MarkerDetector, got {type(detector).__name__}")
         if not detector.params.refine:
             raise ValueError("detector: a tracker needs stage 8 (refine=True) to follow markers")
-        if isinstance(redetect_every, bool) or int(redetect_every) != redetect_every or redetect_every < 1:
+        if isinstance(redetect_every, bool) or not isinstance(redetect_every, numbers.Integral) or redetect_every < 1:
             raise ValueError(f"redetect_every must be an integer >= 1, got {redetect_every!r}")
         if isinstance(keep, bool) or not isinstance(keep, (int, float)) or not 0.0 < keep <= 1.0:
             raise ValueError(f"keep must be a number in (0, 1], got {keep!r}")

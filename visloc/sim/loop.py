@@ -11,6 +11,7 @@ returns stacked arrays and an exit status with a readable reason (:class:`SimSta
 from __future__ import annotations
 
 import math
+import numbers
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -166,7 +167,7 @@ def simulate(
         ``specs``).
     seconds : float, optional
         Override the scenario's duration, s (> 0).
-    dt : float
+    dt : float, optional
         RK4 step of the vehicle, s (> 0; rounded so that a whole number of steps fits in a
         control period). Default: one step per control period without a motor lag (the
         inputs are held over the period; the scenarios' states agree with 1 ms steps within
@@ -233,7 +234,7 @@ def simulate(
     h = _check_rate(dt, "dt") if dt is not None else (0.001 if lag > 0 else ctrl_dt)
     substeps = max(1, round(ctrl_dt / h))
     cam_dt = 1.0 / _check_rate(camera_rate, "camera_rate")
-    if isinstance(redetect_every, bool) or not isinstance(redetect_every, int) or redetect_every < 1:
+    if isinstance(redetect_every, bool) or not isinstance(redetect_every, numbers.Integral) or redetect_every < 1:
         raise ValueError(f"redetect_every must be an integer >= 1, got {redetect_every!r}")
     rng = np.random.default_rng(seed)
     c, d = motor_coefficients(p, sigma, seed=seed)

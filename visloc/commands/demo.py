@@ -149,7 +149,7 @@ def _demo_closed_loop(out: Path) -> bool:
           f"height dip {100 * m['height_dip_m']:.1f} cm (linear model: {100 * m['linear_height_dip_m']:.1f} cm).")
     hover = simulate("hover-vision", seconds=5.0, seed=1)
     h = hover.metrics
-    print(f"Hover on visloc's vision (5 s, {h['camera_frames']} camera frames through the detector and the "
-          f"map localiser): {hover.status.value}, position RMS {100 * h['position_rms_m']:.1f} cm, estimate "
+    print(f"Hover on visloc's vision (5 s, {h['camera_frames']} camera frames through the marker tracker "
+          f"and the map localiser): {hover.status.value}, position RMS {100 * h['position_rms_m']:.1f} cm, estimate "
           f"error RMS {1e3 * h['estimate_rms_m']:.2f} mm, {h['realtime_factor']:.1f}x real time.")
     return step.status is SimStatus.SETTLED and hover.status in (SimStatus.SETTLED, SimStatus.COMPLETED)

@@ -180,7 +180,7 @@ def simulate(
         Called with the simulated time after each simulated second.
     localizer : callable, optional
         Vision front end of the ``"vision"`` estimator (see :class:`VisionEstimator`);
-        default visloc's detector and map localiser.
+        default visloc's marker tracker (``redetect_every``) and map localiser.
     warmup : float, optional
         Seconds of hover on the true state before t = 0, not recorded (the report's take-off
         before its side steps): the integrators absorb the motors' spread first. Default

@@ -93,7 +93,7 @@ SCENARIOS: dict[str, Scenario] = {
         Scenario("push", "a 4 N sideways push for 0.1 s at t = 1 s (report Figure 4.5)", 6.0,
                  push=(1.0, 0.1, np.array([0.0, 4.0, 0.0]))),
         Scenario("hover-vision", "30 s hover in light turbulence on visloc's marker-grid vision: "
-                 "each bottom-camera frame goes through the detector and the map localiser",
+                 "each bottom-camera frame goes through the marker tracker and the map localiser",
                  30.0, estimator="vision", gust_std=0.05),
     )
 }

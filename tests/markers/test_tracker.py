@@ -115,3 +115,15 @@ def test_bad_input_is_named():
         detector.confirm(img, np.full((1, 4, 2), np.nan), [1])
     with pytest.raises(ValueError):
         MarkerTracker(detector).detect(np.zeros((0, 5), np.uint8))
+
+
+def test_white_on_black_markers_are_followed_too(flight):
+    cam, frames = flight
+    negatives = [255 - f for f in frames[:12]]
+    detector = MarkerDetector(cam.dictionary, response="linear", inverted=True)
+    tracker = MarkerTracker(detector, redetect_every=6)
+    for img in negatives:
+        full, got = _by_id(detector.detect(img)), _by_id(tracker.detect(img))
+        assert got and set(got) <= set(full) and all(d.inverted for d in got.values())
+        assert max(np.abs(d.corners - full[i].corners).max() for i, d in got.items()) < 0.02
+    assert tracker.full_detections <= 4

@@ -78,7 +78,23 @@ class MarkerTracker:
         self._last, self._before, self._since = {}, {}, 0
 
     def detect(self, image: NDArray[np.uint8]) -> list[MarkerDetection]:
-        """The markers of the next frame of the video (uint8 grey or BGR), sorted by id."""
+        """The markers of the next frame of the video.
+
+        Parameters
+        ----------
+        image : ndarray (H, W) or (H, W, 3) uint8
+            The frame, grey or BGR; frames come in the video's order.
+
+        Returns
+        -------
+        list of MarkerDetection
+            Sorted by id: a full detection's, or the followed markers that confirmed.
+
+        Raises
+        ------
+        ValueError
+            An image that is not uint8 grey or BGR.
+        """
         gray = to_gray(image)
         self.frames += 1
         dets = self._follow(gray) if self._last and self._since < self.redetect_every - 1 else None

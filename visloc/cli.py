@@ -102,7 +102,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 #: help of ``--fast`` (detect, localize, track): ``visloc.markers.FAST_PASSES``
-_FAST_HELP = "search shrunk images only: about 15-25%% faster at 640x480 and above, misses markers under about 20 px"
+_FAST_HELP = "search shrunk images only: about 15-30%% faster at 640x480 and above, misses markers under about 20 px"
 #: help of ``--response`` (detect, localize, track): ``DetectorParams.response``
 _RESPONSE_HELP = ("how grey levels encode light, for sub-pixel corners: srgb (cameras, most image files; "
                   "the default), linear (linear sensor data, renders made with --linear) or a gamma")

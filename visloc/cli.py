@@ -430,9 +430,9 @@ def _detector_arguments(p: argparse.ArgumentParser) -> None:
                    help="white-on-black markers: no (default), yes (only those), both")
     p.add_argument("--redetect-every", type=_count, default=1, metavar="N",
                    help="videos: the full marker search every Nth frame only, the markers of the last frames "
-                        "followed between (confirmed by the edge refinement and the cell read; a full search "
-                        "whenever one is lost); markers coming into view wait for the next full search "
-                        "(default 1: every frame)")
+                        "followed between (confirmed by the edge refinement and the cell read; one that fails is "
+                        "dropped, and a frame where a quarter fail gets the full search); markers coming into "
+                        "view wait for the next full search (default 1: every frame)")
 
 
 #: sub-command -> (module of visloc.commands, function)

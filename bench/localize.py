@@ -19,7 +19,8 @@ position more than 5 cm off.
 up to 0.4 m/s, 0.8-1.3 m up, roll and pitch up to 0.1 rad; the clean set's camera), where each
 method reads the frames in order, whole video by whole video, the order of the methods turned
 round every round; ``visloc_tracker`` is ``MarkerTracker`` (the full search every 10th frame,
-the markers of the last frames followed between) + the same joint pose. Besides the median
+the markers of the last frames followed between) + the same joint pose; on the video both visloc
+rows start each frame's joint fit from the last frame's pose, as ``visloc localize`` does. Besides the median
 time per frame, the mean (the tracker's full searches are its slowest frames) and the markers
 used per frame. Usage: ``python bench/localize.py [--quick]``; writes
 ``bench/results/localize.json`` and ``localize.md``.
@@ -49,7 +50,9 @@ K = np.array([[320.067, 0, 159.5], [0, 320.067, 119.5], [0, 0, 1]])
 FAIL_M = 0.05
 
 
-def methods(grid):
+def methods(grid, video=False):
+    """visloc's and OpenCV's routes; ``video``: visloc's fit starts from the last frame's pose,
+    as ``visloc localize`` does (reset by ``start()`` before each pass over the video)."""
     cam = Camera(K, size=(320, 240))
     vl = MarkerDetector("DICT_4X4_50")
     d = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50)
@@ -62,12 +65,16 @@ def methods(grid):
         t0 = time.perf_counter()
         dets = vl.detect(img)
         run_visloc.detect_s.append(time.perf_counter() - t0)
-        mp = estimate_camera_pose(dets, grid, cam)
+        mp = estimate_camera_pose(dets, grid, cam, start=run_visloc.last if video else None)
+        run_visloc.last = None if mp is None else mp.pose
         run_visloc.markers.append(len(dets))
         return None if mp is None else (mp.pose.R, mp.pose.t)
 
     run_visloc.detect_s = []  # the detection's share of each call (the rest is the joint pose)
     run_visloc.markers = []
+    run_visloc.last = None
+    if video:
+        run_visloc.start = lambda: setattr(run_visloc, "last", None)
 
     def run_cv(det):
         def f(img):
@@ -95,10 +102,14 @@ def _tracked(grid):
     def f(img):
         dets = f.tracker.detect(img)
         f.markers.append(len(dets))
-        mp = estimate_camera_pose(dets, grid, cam)
+        mp = estimate_camera_pose(dets, grid, cam, start=f.last)  # from the last frame's pose
+        f.last = None if mp is None else mp.pose
         return None if mp is None else (mp.pose.R, mp.pose.t)
 
-    f.start = lambda: setattr(f, "tracker", MarkerTracker(detector, redetect_every=10))
+    def start():
+        f.tracker, f.last = MarkerTracker(detector, redetect_every=10), None
+
+    f.start = start
     f.markers = []
     return f
 
@@ -132,7 +143,7 @@ def run_flight(seconds, rounds):
     for k in range(len(flight.frames)):
         R_world_cam, C = flight.track.pose(k)
         truth.append((C, R_world_cam.T))
-    ms = methods(grid)
+    ms = methods(grid, video=True)
     ms["visloc_tracker"] = _tracked(grid)
     times = {m: [] for m in ms}
     out = {}

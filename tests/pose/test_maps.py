@@ -9,7 +9,7 @@ from visloc.pose import Camera
 from visloc.pose.map_pose import estimate_camera_pose
 from visloc.pose.maps import GridMap, MarkerMap
 from visloc.synth.grid import random_map_view
-from visloc.types import MarkerDetection
+from visloc.types import MarkerDetection, Pose
 
 K = np.array([[320.067, 0, 159.5], [0, 320.067, 119.5], [0, 0, 1]])
 CAM = Camera(K, size=(320, 240))
@@ -100,6 +100,36 @@ def test_rendered_grid_views_give_submillimetre_positions():
         cov = mp.pose.covariance
         assert cov is not None and np.allclose(cov, cov.T)
     assert np.median(errs) < 0.001, errs
+
+
+def _exact_view(g, R_map_cam, pos, moved=None):
+    R, t = R_map_cam.T, -R_map_cam.T @ pos
+    dets = []
+    for i in g.ids:
+        q = g.corners_of(i) @ R.T + t
+        c = (q[:, :2] / q[:, 2:]) @ K[:2, :2].T + K[:2, 2]
+        dets.append(MarkerDetection(int(i), c + (12.0 if i == moved else 0.0)))
+    return dets
+
+
+def test_a_start_near_the_answer_gives_the_same_pose_and_a_far_one_is_dropped():
+    # a video's previous pose as the start: the same fit; a start that leaves a marker beyond
+    # max_residual (here turned half round) is dropped and the fit made from the markers' own poses
+    g = GridMap(4, 4, 0.1, 0.05)
+    R_map_cam = Rotation.from_euler("xyz", [178, 5, 20], degrees=True).as_matrix()
+    pos = np.array([0.25, -0.2, 1.0])
+    dets = _exact_view(g, R_map_cam, pos)
+    cold = estimate_camera_pose(dets, g, CAM)
+    near = Pose(Rotation.from_euler("z", 2, degrees=True).as_matrix() @ cold.pose.R, cold.pose.t + 0.01)
+    far = Pose(Rotation.from_euler("z", 180, degrees=True).as_matrix() @ cold.pose.R, cold.pose.t)
+    for start in (near, far, cold.pose):
+        warm = estimate_camera_pose(dets, g, CAM, start=start)
+        assert np.allclose(warm.position, pos, atol=1e-6) and np.allclose(warm.R_map_cam, R_map_cam, atol=1e-7)
+        assert warm.rejected == [] and len(warm.used) == 16
+    moved = estimate_camera_pose(_exact_view(g, R_map_cam, pos, moved=5), g, CAM, start=cold.pose)
+    assert moved.rejected == [5] and np.allclose(moved.position, pos, atol=1e-6)  # the full fit decides
+    with pytest.raises(TypeError, match="start"):
+        estimate_camera_pose(dets, g, CAM, start=cold)
 
 
 def test_nothing_seen_and_bad_arguments():

@@ -100,6 +100,7 @@ def localize(args: argparse.Namespace) -> int:
     fusion = MapFixFusion(accel_noise=args.accel_noise)  # the map's z axis points up: gravity (0, 0, -9.81)
     R_map_cam = None
     last_t = None
+    last_pose = None
     failed = n_frames = fixes = imu_used = 0
     frame_times: list[float] = []
     errors: list[float] = []
@@ -119,7 +120,8 @@ def localize(args: argparse.Namespace) -> int:
                     out.write(row | {"fix": "unreadable"})
                 continue
             cam = camera_for(camera, frame.image.shape, warned, "localize")
-            mp = estimate_camera_pose(find(frame.image), mmap, cam)
+            mp = estimate_camera_pose(find(frame.image), mmap, cam, start=last_pose)  # from the last fix
+            last_pose = None if mp is None else mp.pose
             force = None
             if imu is not None and R_map_cam is not None and last_t is not None:
                 # mean specific force over the interval (camera axes), turned into the map frame

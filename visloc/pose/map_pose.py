@@ -107,6 +107,7 @@ def estimate_camera_pose(
     max_residual: float = 3.0,
     max_iter: int = 30,
     n_starts: int = 2,
+    start: Pose | None = None,
 ) -> MapPose | None:
     """Pose of the camera in ``marker_map`` from the markers detected in one image.
 
@@ -130,6 +131,11 @@ def estimate_camera_pose(
         How many of the largest markers give starts: both closed-form planar poses of each
         (:func:`visloc.pose.planar_solutions`, the flip included), moved into the map frame;
         the one that reprojects all map corners best starts the joint fit.
+    start : Pose, optional
+        ``T_cam_map`` near the answer (the previous frame's, in a video): the joint fit
+        starts there instead, and is kept if it drops no marker and every marker's RMS
+        reprojection error stays within ``max_residual`` px; otherwise the fit is redone from
+        the markers' own poses.
 
     Returns
     -------
@@ -141,7 +147,8 @@ def estimate_camera_pose(
     Raises
     ------
     TypeError
-        ``marker_map`` is not a :class:`MarkerMap` or ``camera`` not a :class:`Camera`.
+        ``marker_map`` is not a :class:`MarkerMap`, ``camera`` not a :class:`Camera` or
+        ``start`` not a :class:`~visloc.types.Pose`.
     ValueError
         ``pixel_sigma`` (unless None) or ``max_residual`` not a finite number > 0;
         ``max_iter`` or ``n_starts`` not a whole number > 0.
@@ -150,6 +157,8 @@ def estimate_camera_pose(
         raise TypeError(f"marker_map must be a MarkerMap, got {type(marker_map).__name__}")
     if not isinstance(camera, Camera):
         raise TypeError(f"camera must be a Camera, got {type(camera).__name__}")
+    if start is not None and not isinstance(start, Pose):
+        raise TypeError(f"start must be a Pose, got {type(start).__name__}")
     for name, v, integer in (("pixel_sigma", pixel_sigma, False), ("max_residual", max_residual, False),
                              ("max_iter", max_iter, True), ("n_starts", n_starts, True)):
         if v is None and name == "pixel_sigma":
@@ -166,8 +175,34 @@ def estimate_camera_pose(
     obj = np.stack([marker_map.corners_of(i) for i in ids])  # (M, 4, 3)
     xy = camera.normalize(np.concatenate([d.corners for d in known])).reshape(-1, 4, 2)  # (M, 4, 2)
     f = np.array([[camera.fx], [camera.fy]])
-    # start: the own poses (and their flips) of the largest markers in the image, moved into the
-    # map frame; the one that reprojects all map corners best
+    fit = None
+    if start is not None:  # a pose near the answer: kept only if no marker disagrees with it
+        fit = _joint_fit(np.concatenate([start.t, matrix_to_euler(start.R)]), obj, xy, f, camera, ids,
+                         max_iter, max_residual)
+        if fit[2] or fit[3][fit[1]].max() > max_residual:
+            fit = None
+    if fit is None:
+        first = _best_start(known, ids, obj, xy, f, marker_map, n_starts)
+        if first is None:
+            return None
+        fit = _joint_fit(first, obj, xy, f, camera, ids, max_iter, max_residual)
+    best, keep, rejected, res = fit
+    X = obj[keep].reshape(-1, 3)
+    M = levenberg_marquardt(best[None], X.T, xy[keep].reshape(-1, 2).T, f, max_iter=0)[2][0]  # [J | r]^T [J | r]
+    n = 2 * X.shape[0]
+    rms = float(np.sqrt(M[6, 6] / n))
+    cov = _covariance(M, n, pixel_sigma)
+    R = euler_to_matrix(best[3:])
+    pose = Pose(R, best[:3].copy(), rms, cov)
+    return MapPose(pose, [i for i, k in zip(ids, keep, strict=True) if k], rejected, unknown,
+                   {i: float(r) for i, r in zip(ids, res, strict=True)})
+
+
+def _best_start(known: list[MarkerDetection], ids: list[int], obj: FloatArray, xy: FloatArray, f: FloatArray,
+                marker_map: MarkerMap, n_starts: int) -> FloatArray | None:
+    """The start of the joint fit (6,): of the own poses (and their flips) of the ``n_starts``
+    largest markers in the image, moved into the map frame, the one that reprojects all map
+    corners best; None when none is in front of the camera."""
     area = [abs(_area(d.corners)) for d in known]
     start_R, start_t = [], []
     for j in np.argsort(area)[::-1][:n_starts]:
@@ -185,32 +220,30 @@ def estimate_camera_pose(
         return None
     starts = np.concatenate([np.concatenate(start_t), matrix_to_euler(R_s)], axis=1)
     fit = (_marker_rms(starts, obj, xy, f) ** 2).mean(axis=-1)  # per start
+    return np.array(starts[int(np.argmin(fit))])
+
+
+def _joint_fit(params: FloatArray, obj: FloatArray, xy: FloatArray, f: FloatArray, camera: Camera, ids: list[int],
+               max_iter: int, max_residual: float) -> tuple[FloatArray, NDArray[np.bool_], list[int], FloatArray]:
+    """Gauss-Newton over all corners from ``params`` (6,), dropping the worst marker and
+    fitting again while it disagrees with the rest: ``(params, kept, rejected ids, each
+    marker's RMS px)``."""
     keep = np.ones(len(ids), bool)
     rejected: list[int] = []
-    params = np.array(starts[int(np.argmin(fit))])[None]
+    params = params[None]
     while True:
         X = obj[keep].reshape(-1, 3)
         p, sse = refine_params(params, X, xy[keep].reshape(-1, 2), fx=camera.fx, fy=camera.fy, max_iter=max_iter)
         p = np.atleast_2d(p)
         best = p[int(np.argmin(np.atleast_1d(sse)))]
         res = _marker_rms(best, obj, xy, f)
-        used_res = res[keep]
-        limit = max(max_residual, 3.0 * median(used_res.tolist()))  # a few values: no numpy
+        limit = max(max_residual, 3.0 * median(res[keep].tolist()))  # a few values: no numpy
         worst = int(np.argmax(np.where(keep, res, -1.0)))
         if keep.sum() <= 1 or res[worst] <= limit:
-            break
+            return best, keep, rejected, res
         keep[worst] = False
         rejected.append(ids[worst])
         params = best[None]
-    X = obj[keep].reshape(-1, 3)
-    M = levenberg_marquardt(best[None], X.T, xy[keep].reshape(-1, 2).T, f, max_iter=0)[2][0]  # [J | r]^T [J | r]
-    n = 2 * X.shape[0]
-    rms = float(np.sqrt(M[6, 6] / n))
-    cov = _covariance(M, n, pixel_sigma)
-    R = euler_to_matrix(best[3:])
-    pose = Pose(R, best[:3].copy(), rms, cov)
-    return MapPose(pose, [i for i, k in zip(ids, keep, strict=True) if k], rejected, unknown,
-                   {i: float(r) for i, r in zip(ids, res, strict=True)})
 
 
 def _area(corners: FloatArray) -> float:

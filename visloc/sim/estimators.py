@@ -100,6 +100,7 @@ class VisionEstimator:
         self.camera = camera
         self.detector = MarkerDetector(camera.dictionary, response="linear")  # the floor renders are linear
         self.tracker = MarkerTracker(self.detector, redetect_every=redetect_every)
+        self._last_pose: Pose | None = None
         self.intrinsics = Camera(camera.K)
         self.g = check_real(g, "g", positive=True)
         self.attitude_gain = check_real(attitude_gain, "attitude_gain", positive=True)
@@ -136,7 +137,8 @@ class VisionEstimator:
 
     def _visloc_fix(self, image: NDArray[np.uint8]) -> tuple[Pose, FloatArray | None] | None:
         fix = estimate_camera_pose(self.tracker.detect(image), self.camera.marker_map,
-                                   self.intrinsics)
+                                   self.intrinsics, start=self._last_pose)  # from the last frame's pose
+        self._last_pose = None if fix is None else fix.pose
         return None if fix is None else (fix.pose, fix.position_covariance)
 
     def ultrasound(self, t: float, reading: float, std: float = 0.01) -> bool:

@@ -105,7 +105,7 @@ class Controller:
         self.arm = resolve_arm(self.params, arm)
         self.gamma = mixer_matrix(self.params, arm=self.arm)  # report eq. (2.12), mean c, d
         self.K = self.gains.K(integral=True)
-        self.K.setflags(write=False)  # read-only: _feedback keeps its negation while K is the same array
+        self.K.setflags(write=False)  # the designed gains
         tilt = check_real(max_tilt, "max_tilt", positive=True, allow_inf=True)
         self.torque_bound = np.array([self.gains.roll.kp, self.gains.pitch.kp]) * tilt
         self.u0 = hover_input(self.params)  # report §4.2.2: T0 = m g feed-forward
@@ -114,8 +114,6 @@ class Controller:
         self.integral_zone = _zone(integral_zone, "integral_zone")
         self.integral_rate_zone = _zone(integral_rate_zone, "integral_rate_zone")
         self._integral = np.zeros(4)
-        self._neg_k_of: FloatArray | None = None  # the K that _neg_k and _neg_k_setpoint negate
-        self._neg_k = self._neg_k_setpoint = np.zeros((4, 16))
 
     @property
     def integral(self) -> FloatArray:
@@ -148,19 +146,10 @@ class Controller:
         x[8] = wrap_angle(s[8] - sp[3])
         return x
 
-    def _feedback(self) -> tuple[FloatArray, FloatArray]:
-        """``-K`` and its set-point columns ``-K[:, _POSITION_COLUMNS]``, kept while ``K`` is."""
-        if self._neg_k_of is not self.K:
-            self._neg_k = -self.K
-            self._neg_k_setpoint = -self.K[:, _POSITION_COLUMNS]
-            self._neg_k_of = self.K
-        return self._neg_k, self._neg_k_setpoint
-
     def _inputs(self, x: FloatArray, integral: FloatArray) -> tuple[FloatArray, FloatArray]:
         xa = np.concatenate([x, integral])
-        neg_k, neg_k_setpoint = self._feedback()
-        du = neg_k @ xa  # report eq. (4.5): u = -K x
-        setpoint_part = neg_k_setpoint @ xa[_POSITION_COLUMNS]
+        du = -(self.K @ xa)  # report eq. (4.5): u = -K x
+        setpoint_part = -(self.K[:, _POSITION_COLUMNS] @ xa[_POSITION_COLUMNS])
         attitude_part = du - setpoint_part
         # §4.4: bound the set-point part of tau_x, tau_y (np.clip on floats: min(max(v, -b), b))
         bx, by = self.torque_bound.tolist()

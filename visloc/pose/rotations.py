@@ -29,11 +29,6 @@ def euler_to_matrix(angles: ArrayLike) -> FloatArray:
         ``Rz(psi) @ Ry(theta) @ Rx(phi)``.
     """
     a = np.asarray(angles, dtype=np.float64)[..., -3:]
-    if a.ndim == 1:  # one rotation: the same products on floats, a fifth of the time
-        (cph, cth, cps), (sph, sth, sps) = map(math.cos, a.tolist()), map(math.sin, a.tolist())
-        return np.array([[cps * cth, cps * sth * sph - sps * cph, cps * sth * cph + sps * sph],
-                         [sps * cth, sps * sth * sph + cps * cph, sps * sth * cph - cps * sph],
-                         [-sth, cth * sph, cth * cph]])
     c = np.cos(a)
     s = np.sin(a)
     cph, cth, cps = c[..., 0], c[..., 1], c[..., 2]

@@ -17,7 +17,7 @@ from visloc.control._checks import as_array, check_params, check_real, resolve_a
 from visloc.control.design import ControllerGains, ControlSpecs, design_gains
 from visloc.control.linear import _pilot_state, hover_input
 from visloc.model.params import ARDRONE2, ARDrone2Params
-from visloc.model.propulsion import PwmResult, mixer_matrix, pwm_from_inputs
+from visloc.model.propulsion import PwmResult, mixer_matrix, pwm_from_bar
 from visloc.types import FloatArray
 
 _POSITION_COLUMNS = np.r_[0:6, 12:16]  # x_P..w_P and the integrals: the "set-point" part
@@ -104,8 +104,11 @@ class Controller:
         self.gains = design_gains(self.params, specs) if gains is None else gains
         self.arm = resolve_arm(self.params, arm)
         self.gamma = mixer_matrix(self.params, arm=self.arm)  # report eq. (2.12), mean c, d
+        self.gamma.setflags(write=False)
         self.K = self.gains.K(integral=True)
         self.K.setflags(write=False)  # the designed gains
+        self._K_setpoint = self.K[:, _POSITION_COLUMNS]  # the columns of the set-point part (§4.4)
+        self._gamma_inv = np.linalg.inv(self.gamma)  # report eq. (4.6)'s Gamma^-1
         tilt = check_real(max_tilt, "max_tilt", positive=True, allow_inf=True)
         self.torque_bound = np.array([self.gains.roll.kp, self.gains.pitch.kp]) * tilt
         self.u0 = hover_input(self.params)  # report §4.2.2: T0 = m g feed-forward
@@ -146,10 +149,10 @@ class Controller:
         x[8] = wrap_angle(s[8] - sp[3])
         return x
 
-    def _inputs(self, x: FloatArray, integral: FloatArray) -> tuple[FloatArray, FloatArray]:
+    def _inputs(self, x: FloatArray, integral: FloatArray) -> tuple[FloatArray, tuple[bool, ...]]:
         xa = np.concatenate([x, integral])
         du = -(self.K @ xa)  # report eq. (4.5): u = -K x
-        setpoint_part = -(self.K[:, _POSITION_COLUMNS] @ xa[_POSITION_COLUMNS])
+        setpoint_part = -(self._K_setpoint @ xa[_POSITION_COLUMNS])
         attitude_part = du - setpoint_part
         # §4.4: bound the set-point part of tau_x, tau_y (np.clip on floats: min(max(v, -b), b))
         bx, by = self.torque_bound.tolist()
@@ -161,8 +164,7 @@ class Controller:
         dt_limited = min(max(thrust, -limit), limit)
         du[0] = dt_limited
         # tau_x moves y, tau_y moves x; the thrust bound freezes z
-        clipped = np.array([ty != sy, tx != sx, dt_limited != thrust, False])
-        return self.u0 + du, clipped
+        return self.u0 + du, (ty != sy, tx != sx, dt_limited != thrust, False)
 
     def _feed_forward(self, x: FloatArray, psi: float, reference: tuple[ArrayLike, ArrayLike]) -> float:
         """Shift the error state ``x`` (in place) by a reference motion and return the thrust
@@ -210,11 +212,12 @@ class Controller:
         x = self.error_state(state, setpoint)
         thrust_ff = 0.0 if reference is None else self._feed_forward(x, float(np.asarray(state, float)[8]), reference)
         _, clipped = self._inputs(x, self._integral)
-        e = np.array([x[0], x[1], x[2], x[8]])
-        rate = np.array([x[3], x[4], x[5], x[11]])
-        moving = (np.abs(e) > self.integral_zone) & (np.abs(rate) > self.integral_rate_zone)
-        frozen = clipped | moving
-        self._integral = np.where(frozen, self._integral, self._integral + e * step)  # §4.2.3
+        v = x.tolist()
+        e, rate = (v[0], v[1], v[2], v[8]), (v[3], v[4], v[5], v[11])
+        zone, rate_zone = self.integral_zone.tolist(), self.integral_rate_zone.tolist()
+        # §4.2.3: integrate unless that axis's command is clipped or it moves outside its zone
+        self._integral = np.array([i if c or (abs(a) > z and abs(b) > w) else i + a * step for i, c, a, b, z, w
+                                   in zip(self._integral.tolist(), clipped, e, rate, zone, rate_zone, strict=True)])
         u, _ = self._inputs(x, self._integral)
         u[0] += thrust_ff
         return u
@@ -231,8 +234,9 @@ class Controller:
         Returns
         -------
         PwmResult
-            Commands of motors 1-4 in percent, with saturation flags
-            (:func:`visloc.model.pwm_from_inputs`, using the mean-coefficient mixer).
+            Commands of motors 1-4 in percent, with saturation flags, as
+            :func:`visloc.model.pwm_from_inputs` gives them with the mean-coefficient mixer
+            (whose inverse the controller keeps).
         """
         u = self.command(state, setpoint, dt, reference=reference)
-        return pwm_from_inputs(u, self.params, gamma=self.gamma)  # report eq. (4.6)
+        return pwm_from_bar(self._gamma_inv @ u, self.params.k)  # report eq. (4.6): sqrt(Gamma^-1 u) - k

@@ -384,7 +384,7 @@ class PositionVelocityKF:
                 raise ValueError("accel input needs model='cv'; with model='ca' use "
                                  "update_acceleration")
             u = as_float_array(accel, "accel", (self.dims,))
-            if not np.all(np.isfinite(u)):
+            if not np.isfinite(u).all():
                 self.skipped["accel_input"] += 1
                 u = None
         std = None if accel_std is None else check_real(accel_std, "accel_std", positive=True)
@@ -405,7 +405,8 @@ class PositionVelocityKF:
             self.kf.predict(u=u.reshape(-1, 1), B=B, F=F, Q=Q)  # x = F x + B u
         self.kf.P = 0.5 * (self.kf.P + self.kf.P.T)
         self.t = t
-        self._record(t, (F, self.x, self.P))
+        if self.keep_history:  # (x and P are copies: none made for nothing)
+            self._record(t, (F, self.x, self.P))
 
     # ------------------------------------------------------------------------------ update
     def _measurement_cov(self, R: object, std: object, name: str) -> FloatArray | None:

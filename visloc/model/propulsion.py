@@ -296,18 +296,41 @@ def pwm_from_inputs(
         s = np.linalg.solve(g, u)  # Gamma^-1 u, report eq. (4.6)
     except np.linalg.LinAlgError as exc:
         raise ValueError("gamma: the mixer matrix is singular") from exc
-    k = params.k
-    raw = np.sqrt(np.maximum(s, 0.0)) - k  # report eq. (4.6); a negative Gamma^-1 u gives -k
-    pwm = np.clip(raw, 0.0, pwm_max)
+    return pwm_from_bar(s, params.k, pwm_max)
+
+
+def pwm_from_bar(bar: FloatArray, k: float, pwm_max: float = 100.0) -> PwmResult:
+    """The commands ``pwm = sqrt(bar) - k`` of requested squared terms ``bar = Gamma^-1 u``,
+    saturated as :func:`pwm_from_inputs` says (whose second half this is; a controller that
+    keeps ``Gamma^-1`` calls it directly). Arguments are not checked.
+
+    Parameters
+    ----------
+    bar : ndarray (4,) float64
+        ``Gamma^-1 u`` of motors 1-4, %^2.
+    k : float
+        Shared shift, percent.
+    pwm_max : float
+        Upper command limit, percent.
+
+    Returns
+    -------
+    PwmResult
+        As :func:`pwm_from_inputs` (``pwm_bar`` is ``bar``).
+    """
+    s = bar
+    values = s.tolist()
+    raw = [math.sqrt(max(v, 0.0)) - k for v in values]  # report eq. (4.6); a negative Gamma^-1 u gives -k
+    pwm = np.array([min(max(r, 0.0), pwm_max) for r in raw])
     reasons = []
     for i in range(4):
-        if s[i] < 0:
+        if values[i] < 0:
             reasons.append(
-                f"motor {i + 1}: Gamma^-1 u = {s[i]:.4g} %^2 < 0 (unreachable), set to 0"
+                f"motor {i + 1}: Gamma^-1 u = {values[i]:.4g} %^2 < 0 (unreachable), set to 0"
             )
         elif raw[i] < 0:
             reasons.append(
-                f"motor {i + 1}: thrust below the minimum at pwm > 0 ({s[i]:.4g} < k^2 = "
+                f"motor {i + 1}: thrust below the minimum at pwm > 0 ({values[i]:.4g} < k^2 = "
                 f"{k * k:.4g} %^2), set to 0"
             )
         elif raw[i] > pwm_max:

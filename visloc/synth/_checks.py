@@ -37,7 +37,8 @@ def check_camera(K: object) -> NDArray[np.float64]:
         raise ValueError(f"K must have shape (3, 3), got {k.shape}")
     if not np.all(np.isfinite(k)):
         raise ValueError("K must be finite")
-    if k[0, 0] <= 0 or k[1, 1] <= 0 or not np.allclose(k[2], [0.0, 0.0, 1.0]):
+    a, b, c = k[2].tolist()  # np.allclose(k[2], [0, 0, 1])'s test, without its 30 us
+    if k[0, 0] <= 0 or k[1, 1] <= 0 or not (abs(a) <= 1e-8 and abs(b) <= 1e-8 and abs(c - 1.0) <= 1e-8 + 1e-5):
         raise ValueError(f"K must have fx > 0, fy > 0 and last row [0, 0, 1], got {k.tolist()}")
     return k
 

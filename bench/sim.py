@@ -3,7 +3,7 @@
 - Every scenario with the default controller, nominal motors (``settling``, ``overshoot``,
   ``height dip``, the linear model's figures) and the wall-clock speed as simulated seconds
   per second (``realtime_factor``), pinned to one CPU core with OpenCV single-threaded.
-- ``hover-vision`` three times on the same seed: the vision front end is visloc's
+- ``hover-vision`` three ways on the same seed: the vision front end is visloc's
   (``MarkerTracker``: a full ``MarkerDetector`` search every 10 frames, the markers followed
   between; then ``estimate_camera_pose``), visloc's with the full search on every frame, or
   OpenCV's route (``cv2.aruco.ArucoDetector``
@@ -11,6 +11,7 @@
   Kalman filter and controller: position RMS from the set point, estimate error, speed.
 - ``hover-vision`` with the camera's true pose as every fix (no marker vision), the frames
   rendered or not: the loop's own speed, the ceiling of the vision rows' ``x real time``.
+  The five hover-vision rows run three times each, interleaved; their speed is the median.
 - ``sidestep`` with the motors drawn at +-1 and +-2 sigma (4 seeds each).
 - ``--sweep``: the grid of position / attitude loop specifications that chose the defaults
   of :class:`visloc.control.ControlSpecs` (side step and push on the non-linear model, the
@@ -55,6 +56,7 @@ from visloc.types import Pose
 
 ROOT = Path(__file__).resolve().parents[1]
 P = replace(ARDRONE2, arm=0.125)
+ROUNDS = 3  # interleaved runs of each hover-vision row; its x real time is their median
 
 
 def opencv_localizer():
@@ -110,6 +112,22 @@ def ceiling(seconds: float | None, render: bool) -> dict:
     return fly(sc, vehicle, Controller(P), estimator, sensors=sensors, seconds=seconds, rng=rng)
 
 
+def _median_speed(runs: dict, rounds: int) -> list[dict]:
+    """A row per run, its ``x real time`` the median of ``rounds`` interleaved runs (the same
+    seeded flight each time: every other figure must come out the same)."""
+    rows: dict[str, list[dict]] = {name: [] for name in runs}
+    for k in range(rounds):
+        for name in (list(runs) if k % 2 == 0 else list(runs)[::-1]):
+            rows[name].append(_row(name, runs[name]()))
+    out = []
+    for name, rs in rows.items():
+        same = [{k: v for k, v in r.items() if k != "realtime_factor"} for r in rs]
+        assert all(r == same[0] for r in same), f"{name}: the repeated runs differ"
+        out.append({**rs[0], "realtime_factor": float(np.median([r["realtime_factor"] for r in rs])),
+                    "realtime_factor_runs": [r["realtime_factor"] for r in rs]})
+    return out
+
+
 def _row(name, r):
     m = r.metrics
     return {"run": name, "status": r.status.value, **{k: m.get(k) for k in (
@@ -124,16 +142,18 @@ def scenarios(quick: bool) -> list[dict]:
         rows.append(_row(name, simulate(name)))
         print(rows[-1], file=sys.stderr)
     seconds = 10.0 if quick else None
-    for label, loc, every in (("hover-vision (visloc)", None, 10),
-                              ("hover-vision (visloc, full detection every frame)", None, 1),
-                              ("hover-vision (OpenCV front end)", opencv_localizer(), 1)):
-        rows.append(_row(label, simulate("hover-vision", seed=1, seconds=seconds, localizer=loc,
-                                         redetect_every=every)))
-        print(rows[-1], file=sys.stderr)
-    for label, render in (("hover-vision, the true pose as each fix: rendered, no marker vision", True),
-                          ("hover-vision, the true pose as each fix: no render, no marker vision", False)):
-        rows.append(_row(label, ceiling(seconds, render)))
-        print(rows[-1], file=sys.stderr)
+    runs = {
+        "hover-vision (visloc)": lambda: simulate("hover-vision", seed=1, seconds=seconds, redetect_every=10),
+        "hover-vision (visloc, full detection every frame)":
+            lambda: simulate("hover-vision", seed=1, seconds=seconds, redetect_every=1),
+        "hover-vision (OpenCV front end)":
+            lambda: simulate("hover-vision", seed=1, seconds=seconds, localizer=opencv_localizer(), redetect_every=1),
+        "hover-vision, the true pose as each fix: rendered, no marker vision": lambda: ceiling(seconds, True),
+        "hover-vision, the true pose as each fix: no render, no marker vision": lambda: ceiling(seconds, False),
+    }
+    rows += _median_speed(runs, ROUNDS)
+    for row in rows[-len(runs):]:
+        print(row, file=sys.stderr)
     for sigma in (1.0, 2.0):
         for seed in range(1 if quick else 4):
             rows.append(_row(f"sidestep sigma={sigma:g} seed={seed}", simulate("sidestep", sigma=sigma, seed=seed)))
@@ -179,6 +199,13 @@ def _fmt(v, digits=3):
     return fmt(v, digits, style="g", none="n/a")
 
 
+def _speed(row: dict) -> str:
+    """``x real time``, with the range of the repeated runs where there were some."""
+    runs = row.get("realtime_factor_runs")
+    extra = f" ({_fmt(min(runs))}-{_fmt(max(runs))})" if runs else ""
+    return _fmt(row["realtime_factor"]) + extra
+
+
 def markdown(result) -> str:
     lines = [
         "# Closed-loop simulation (`python bench/sim.py`)", "",
@@ -187,7 +214,8 @@ def markdown(result) -> str:
         "bottom camera 320x240 at 30 Hz over a 10 x 10 DICT_4X4_100 grid (hover-vision, light turbulence; "
         "visloc's front end: full detection every 10 frames, markers followed between, unless said; the two "
         "'true pose' rows take the marker vision out, each fix the camera's true pose, to show the loop's own "
-        "speed with the frames rendered and without). Settling: 5 % band "
+        f"speed with the frames rendered and without; each hover-vision row's x real time is the median of "
+        f"{ROUNDS} interleaved runs of the same flight, their range in brackets). Settling: 5 % band "
         "(5 cm; 25 cm for the 5 m steps, counted from the trajectory's end); height dip: largest height "
         "loss after the step or push; for the squares and eights, pos RMS is the tracking error from the moving "
         "reference."), "",
@@ -204,7 +232,7 @@ def markdown(result) -> str:
         lines.append(
             f"| {r['run']} | {r['status']} | {_fmt(r['settling_time_s'])} | {_fmt(r['overshoot_pct'])} | "
             f"{_fmt(dip)} | {_fmt(100 * r['position_rms_m'])} | {_fmt(1000 * r['estimate_rms_m'])} | "
-            f"{fixes} | {lin} | {_fmt(r['realtime_factor'])} |")
+            f"{fixes} | {lin} | {_speed(r)} |")
     if result.get("sweep"):
         lines += ["", "## Specification sweep (side step, push, 256 vertices at 2 sigma)", "",
                   ("| attitude rad/s | position rad/s | PM deg | integral | settle s | overshoot % | "

@@ -7,7 +7,15 @@ import numpy as np
 import pytest
 
 from visloc.control import Controller, ControlSpecs, LoopSpec, wrap_angle
-from visloc.model import ARDRONE2, derivatives, hover_pwm, mixer_matrix, pwm_bar
+from visloc.model import (
+    ARDRONE2,
+    derivatives,
+    hover_pwm,
+    mixer_matrix,
+    pwm_bar,
+    pwm_from_bar,
+    pwm_from_inputs,
+)
 
 P = ARDRONE2
 DT = 0.005  # 200 Hz, the AR.Drone's navdata rate
@@ -43,6 +51,23 @@ def test_hover_at_the_setpoint_gives_the_trim():
     res = ctrl.pwm(x, sp, DT)
     np.testing.assert_allclose(res.pwm, hover_pwm(P), rtol=1e-12)
     assert not res.saturated
+
+
+def test_motor_commands_are_pwm_from_inputs_of_the_command():
+    # the controller keeps Gamma^-1; its commands are pwm_from_inputs' (which solves), saturations too
+    rng = np.random.default_rng(3)
+    for scale in (0.01, 0.3, 3.0):  # near hover, moderate, far off: every motor clipped one way or the other
+        for _ in range(30):
+            c = Controller(P)
+            state = np.r_[rng.normal(0, scale, 6), rng.normal(0, 0.1 * scale, 6)]
+            setpoint = rng.normal(0, scale, 4)
+            got = c.pwm(state, setpoint, 0.0)
+            want = pwm_from_inputs(Controller(P).command(state, setpoint, 0.0), P, gamma=c.gamma)
+            np.testing.assert_allclose(got.pwm, want.pwm, rtol=1e-12, atol=1e-9)
+            np.testing.assert_allclose(got.pwm_bar, want.pwm_bar, rtol=1e-12, atol=1e-9)
+            assert got.saturated == want.saturated and got.reason.split(":")[0] == want.reason.split(":")[0]
+    below = pwm_from_bar(np.array([-1.0, 0.5 * P.k**2, 1600.0, 200.0**2]), P.k)
+    assert below.pwm.tolist() == [0.0, 0.0, 40.0 - P.k, 100.0] and below.reason.count("motor") == 3
 
 
 def test_error_state_is_in_the_pilot_frame():

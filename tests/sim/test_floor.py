@@ -81,17 +81,21 @@ def test_the_warped_view_is_the_ray_traced_one():
 
     cam = BottomCamera(GridMap(3, 3, 0.1, 0.05), "DICT_4X4_50", rng=np.random.default_rng(0))
     floor, rng, warped = cam.floor, np.random.default_rng(1), 0
+    levels = tuple(level.astype(np.float32) for level in floor.levels)  # the geometry, without uint8 rounding
     for _ in range(8):
         state = np.zeros(12)
         state[:3] = [*rng.uniform(-0.05, 0.05, 2), -rng.uniform(0.3, 0.5)]
         pose = cam.pose(state, euler_to_matrix(rng.uniform(-0.1, 0.1, 3)))
         R, C = pose.R.T, -pose.R.T @ pose.t
         C[:2] -= floor.origin
-        ray = _render(floor.levels, cam.K, cam.size, R, C, floor.metres_per_texel, 2)
-        fast = _warped(floor.levels, cam.K, cam.size, R, C, floor.metres_per_texel, 2)
+        ray = _render(levels, cam.K, cam.size, R, C, floor.metres_per_texel, 2)
+        fast = _warped(levels, cam.K, cam.size, R, C, floor.metres_per_texel, 2)
         if fast is not None:
             warped += 1
             assert np.abs(fast - ray).max() < 0.1
+            as_stored = _warped(floor.levels, cam.K, cam.size, R, C, floor.metres_per_texel, 2)
+            # rounded three times: the texels, the samples, their means (half a grey level each at most)
+            assert as_stored.dtype == np.uint8 and np.abs(as_stored - ray).max() <= 1.5
     assert warped >= 4
     far = cam.pose(np.r_[5.0, 5.0, -0.4, np.zeros(9)], np.eye(3))  # over the floor's mirror tiling
     R, C = far.R.T, -far.R.T @ far.t

@@ -40,16 +40,17 @@ class FloorTexture:
 
     Attributes
     ----------
-    levels : tuple of ndarray (H, W) float32
-        Mip-map of the printed floor (grey levels 0-255), texel ``(u, v)`` at map point
-        ``origin + (u, v) * metres_per_texel``.
+    levels : tuple of ndarray (H, W) uint8
+        Mip-map of the printed floor (grey levels 0-255, rounded: a quarter of float32's
+        memory, which a simulation rendering every frame feels in the cache), texel ``(u, v)``
+        at map point ``origin + (u, v) * metres_per_texel``.
     origin : ndarray (2,)
         Map ``(x, y)`` of texel ``(0, 0)``, m.
     metres_per_texel : float
     marker_map : MarkerMap
     """
 
-    levels: tuple[NDArray[np.float32], ...]
+    levels: tuple[NDArray[np.uint8], ...]
     origin: FloatArray
     metres_per_texel: float
     marker_map: MarkerMap
@@ -94,7 +95,8 @@ class FloorTexture:
                 raise ValueError(f"marker_map: id {marker_id} is not in {dic.name} "
                                  f"(0-{len(dic) - 1})")
             _print_marker(floor, dic.bits[marker_id], (quad[:, :2] - lo) / mpt)
-        return cls(_mipmap(floor), lo, mpt, marker_map)
+        levels = tuple(np.clip(np.rint(level), 0, 255).astype(np.uint8) for level in _mipmap(floor))
+        return cls(levels, lo, mpt, marker_map)
 
     def render(self, K: NDArray, size: tuple[int, int], T_cam_map: Pose, *, supersample: int = 2,
                noise_sigma: float = 0.0, blur_sigma: float = 0.0,
@@ -147,12 +149,13 @@ class FloorTexture:
                        noise_sigma=noise, fast_noise=bool(fast_noise))[0]
 
 
-def _warped(levels: tuple[NDArray[np.float32], ...], K: FloatArray, size: tuple[int, int], R: FloatArray,
-            C: FloatArray, mpt: float, s: int) -> NDArray[np.float32] | None:
+def _warped(levels: tuple[NDArray, ...], K: FloatArray, size: tuple[int, int], R: FloatArray,
+            C: FloatArray, mpt: float, s: int) -> NDArray | None:
     """The view of :func:`visloc.synth.flight._render` by one ``cv2.warpPerspective`` of the
     texture level: the floor plane maps to the image by a homography, so the texture is
     warped (bilinear, ``s`` x ``s`` samples per pixel averaged) instead of sampled through
-    per-pixel rays (the same grey levels to about 0.05, in under half the time at 320 x 240). None
+    per-pixel rays (the same grey levels to about 0.05, in under half the time at 320 x 240), in
+    the levels' type (uint8 for a :class:`FloorTexture`: rounded at each sample and mean). None
     when the view reaches beyond the texture, whose mirror tiling ``_render`` keeps."""
     w, h = size
     tex, scale = _texture_level(levels, K, size, R, C, mpt)

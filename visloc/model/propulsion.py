@@ -318,8 +318,7 @@ def pwm_from_bar(bar: FloatArray, k: float, pwm_max: float = 100.0) -> PwmResult
     PwmResult
         As :func:`pwm_from_inputs` (``pwm_bar`` is ``bar``).
     """
-    s = bar
-    values = s.tolist()
+    values = bar.tolist()
     raw = [math.sqrt(max(v, 0.0)) - k for v in values]  # report eq. (4.6); a negative Gamma^-1 u gives -k
     pwm = np.array([min(max(r, 0.0), pwm_max) for r in raw])
     reasons = []
@@ -335,7 +334,7 @@ def pwm_from_bar(bar: FloatArray, k: float, pwm_max: float = 100.0) -> PwmResult
             )
         elif raw[i] > pwm_max:
             reasons.append(f"motor {i + 1}: pwm {raw[i]:.4g} % > {pwm_max:g} %, clipped")
-    return PwmResult(pwm=pwm, saturated=bool(reasons), reason="; ".join(reasons), pwm_bar=s)
+    return PwmResult(pwm=pwm, saturated=bool(reasons), reason="; ".join(reasons), pwm_bar=bar)
 
 
 def hover_pwm(params: ARDrone2Params, *, mass: float | None = None) -> float:

@@ -190,8 +190,9 @@ def degrade(
         JPEG round-trip quality in [1, 100], or ``None`` for none.
     fast_noise : bool
         Draw the noise with OpenCV's ``cv2.randn`` (its per-thread generator seeded from
-        ``rng``) in a sixth of ``rng.normal``'s time: the closed-loop simulation's camera.
-        False keeps ``rng.normal``, whose draws every stored render was made with.
+        ``rng``) in a sixth of ``rng.normal``'s time, and do the arithmetic in float32 (the
+        same rounding to uint8): the closed-loop simulation's camera. False keeps float64
+        and ``rng.normal``, with which every stored render was made.
 
     Returns
     -------

@@ -103,12 +103,12 @@ class Controller:
             raise TypeError(f"gains: expected ControllerGains, got {type(gains).__name__}")
         self.gains = design_gains(self.params, specs) if gains is None else gains
         self.arm = resolve_arm(self.params, arm)
-        self.gamma = mixer_matrix(self.params, arm=self.arm)  # report eq. (2.12), mean c, d
-        self.gamma.setflags(write=False)
-        self.K = self.gains.K(integral=True)
-        self.K.setflags(write=False)  # the designed gains
-        self._K_setpoint = self.K[:, _POSITION_COLUMNS]  # the columns of the set-point part (§4.4)
-        self._gamma_inv = np.linalg.inv(self.gamma)  # report eq. (4.6)'s Gamma^-1
+        self._gamma = mixer_matrix(self.params, arm=self.arm)  # report eq. (2.12), mean c, d
+        self._K = self.gains.K(integral=True)
+        for a in (self._gamma, self._K):
+            a.setflags(write=False)  # fixed, and what follows is derived from them
+        self._K_setpoint = self._K[:, _POSITION_COLUMNS]  # the columns of the set-point part (§4.4)
+        self._gamma_inv = np.linalg.inv(self._gamma)  # report eq. (4.6)'s Gamma^-1
         tilt = check_real(max_tilt, "max_tilt", positive=True, allow_inf=True)
         self.torque_bound = np.array([self.gains.roll.kp, self.gains.pitch.kp]) * tilt
         self.u0 = hover_input(self.params)  # report §4.2.2: T0 = m g feed-forward
@@ -117,6 +117,16 @@ class Controller:
         self.integral_zone = _zone(integral_zone, "integral_zone")
         self.integral_rate_zone = _zone(integral_rate_zone, "integral_rate_zone")
         self._integral = np.zeros(4)
+
+    @property
+    def K(self) -> FloatArray:
+        """The designed gains (4, 16) on the 12 pilot-frame states and 4 integrals (read-only)."""
+        return self._K
+
+    @property
+    def gamma(self) -> FloatArray:
+        """The mixer (4, 4) of eq. (2.12) with the mean motor coefficients (read-only)."""
+        return self._gamma
 
     @property
     def integral(self) -> FloatArray:

@@ -179,7 +179,8 @@ def estimate_camera_pose(
     if start is not None:  # a pose near the answer: kept only if no marker disagrees with it
         fit = _joint_fit(np.concatenate([start.t, matrix_to_euler(start.R)]), obj, xy, f, camera, ids,
                          max_iter, max_residual)
-        if fit[2] or fit[3][fit[1]].max() > max_residual:
+        _, kept, dropped, res = fit
+        if dropped or res[kept].max() > max_residual:
             fit = None
     if fit is None:
         first = _best_start(known, ids, obj, xy, f, marker_map, n_starts)

@@ -180,10 +180,8 @@ class Vehicle:
         h = check_real(dt, "dt", positive=True)
         key = pwm.tobytes() if isinstance(pwm, np.ndarray) else None
         if key is None or key != self._last_key:  # a new command (the substeps of a control step repeat it)
-            top = self.pwm_max
-            cmd = np.array([min(max(v, 0.0), top) for v in as_array(pwm, "pwm", (4,)).tolist()])  # np.clip's
-            # pwm_bar(cmd, k) without its checks (the same array expression: the same values)
-            self._last_key, self._target = key, np.where(cmd > 0, (cmd + self.params.k) ** 2, 0.0)  # eqs. (2.17)-(2.18)
+            cmd = np.clip(as_array(pwm, "pwm", (4,)), 0.0, self.pwm_max)
+            self._last_key, self._target = key, pwm_bar(cmd, self.params.k)  # report eqs. (2.17)-(2.18)
             self.pwm = cmd
         target = self._target
         if self.motor_lag > 0.0:  # report eq. (2.13), solved exactly over the step

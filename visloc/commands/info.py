@@ -31,6 +31,7 @@ def _describe(source: str) -> dict:
                 out[attr] = getattr(src, attr)
         first = next((f for f in src if f.image is not None), None)
         out["size"] = None if first is None else [int(first.image.shape[1]), int(first.image.shape[0])]
+        out["readable"] = first is not None  # False: not one frame decodes
     return out
 
 
@@ -45,12 +46,13 @@ def info(args: argparse.Namespace) -> int:
     Returns
     -------
     int
-        Exit status 0.
+        Exit status 0; 1 when a folder or video holds no frame that can be read (``readable``
+        false in the JSON).
     """
     facts = _describe(os.fspath(args.source))
     if args.json:
         print(json.dumps(facts, indent=1))
-        return 0
+        return 0 if facts.get("readable", True) else 1
     print(f"{facts['source']}: {facts['kind']}")
     if facts["kind"] == "recording":
         print(f"  {'topic':<32} {'type':<36} {'count':>7} {'rate Hz':>8}")
@@ -58,8 +60,8 @@ def info(args: argparse.Namespace) -> int:
             rate = "-" if t["rate_hz"] is None else f"{t['rate_hz']:.2f}"
             print(f"  {t['topic']:<32} {t['type']:<36} {t['count']:>7} {rate:>8}")
     else:
-        size = "unknown" if facts["size"] is None else f"{facts['size'][0]} x {facts['size'][1]} px"
+        size = "no frame can be read" if facts["size"] is None else f"{facts['size'][0]} x {facts['size'][1]} px"
         frames = "unknown" if facts["frames"] is None else facts["frames"]
         rate = f", {facts['native_fps']:g} fps" if "native_fps" in facts else ""
         print(f"  {frames} frames{rate}, {size}")
-    return 0
+    return 0 if facts.get("readable", True) else 1

@@ -19,7 +19,10 @@ position more than 5 cm off.
 up to 0.4 m/s, 0.8-1.3 m up, roll and pitch up to 0.1 rad; the clean set's camera), where each
 method reads the frames in order, whole video by whole video, the order of the methods turned
 round every round; ``visloc_tracker`` is ``MarkerTracker`` (the full search every 10th frame,
-the markers of the last frames followed between) + the same joint pose; on the video both visloc
+the markers of the last frames followed between) + the same joint pose; ``visloc_tracker_map``
+the same tracker also told the map's markers in the last fix's view (``markers_in_view``), so
+the full search runs only when following fails, as ``visloc localize --redetect-every 10``
+does; on the video the visloc
 rows start each frame's joint fit from the last frame's pose, as ``visloc localize`` does. Besides the median
 time per frame, the mean (the tracker's full searches are its slowest frames) and the markers
 used per frame. Usage: ``python bench/localize.py [--quick]``; writes
@@ -40,7 +43,7 @@ from scipy.spatial.transform import Rotation
 
 from visloc.markers import MarkerDetector, MarkerTracker
 from visloc.pose import Camera
-from visloc.pose.map_pose import estimate_camera_pose
+from visloc.pose.map_pose import estimate_camera_pose, markers_in_view
 from visloc.pose.maps import GridMap
 from visloc.synth.camera import CameraEffects
 from visloc.synth.grid import FLIGHT_CAMERA, random_map_view, render_map_flight
@@ -94,13 +97,16 @@ def methods(grid, video=False):
     return {"visloc": run_visloc, "opencv": run_cv(cv_default), "opencv_subpix": run_cv(cv_subpix)}
 
 
-def _tracked(grid):
-    """visloc with :class:`MarkerTracker` (a new tracker per pass over the video)."""
+def _tracked(grid, guided=False):
+    """visloc with :class:`MarkerTracker` (a new tracker per pass over the video); ``guided``:
+    each frame told the map's markers in the last fix's view (``markers_in_view``), as
+    ``visloc localize --redetect-every N`` does."""
     cam = Camera(K, size=(320, 240))
     detector = MarkerDetector("DICT_4X4_50")
 
     def f(img):
-        dets = f.tracker.detect(img)
+        expected = markers_in_view(grid, cam, f.last) if guided and f.last is not None else None
+        dets = f.tracker.detect(img, expected=expected)
         f.markers.append(len(dets))
         mp = estimate_camera_pose(dets, grid, cam, start=f.last)  # from the last frame's pose
         f.last = None if mp is None else mp.pose
@@ -145,6 +151,7 @@ def run_flight(seconds, rounds):
         truth.append((C, R_world_cam.T))
     ms = methods(grid, video=True)
     ms["visloc_tracker"] = _tracked(grid)
+    ms["visloc_tracker_map"] = _tracked(grid, guided=True)
     times = {m: [] for m in ms}
     out = {}
     for r in range(rounds):
@@ -163,6 +170,8 @@ def run_flight(seconds, rounds):
                     **_errors(truth, out[m])}
         if hasattr(ms[m], "markers"):
             stats[m]["markers_per_frame"] = float(np.mean(ms[m].markers))
+        if hasattr(ms[m], "tracker"):
+            stats[m]["full_searches"] = ms[m].tracker.full_detections  # in the last pass over the video
     return {"frames": len(flight.frames), "stats": stats}
 
 
@@ -239,6 +248,10 @@ def markdown(result) -> str:
                     f"{f(s.get('markers_per_frame'), 1)} | ") if video else ""
             lines.append(f"| {m} | {f(s['ms_median'])} | {f(s['ms_median'] / base)} | {mean}{s['failures']} | "
                          f"{f(s['pos_err_median_mm'])} | {f(s['pos_err_p90_mm'])} | {f(s['rot_err_median_deg'], 3)} |")
+        searches = {m: s["full_searches"] for m, s in res["stats"].items() if "full_searches" in s}
+        if searches:
+            lines.append(f"\nFull searches in one pass over the {res['frames']} frames: "
+                         + ", ".join(f"{m} {n}" for m, n in searches.items()) + ".")
         if "visloc_detect_ms_median" in res:
             lines.append(f"\nvisloc's time: marker detection {res['visloc_detect_ms_median']:.2f} ms (median), "
                          "the joint map pose the rest.")

@@ -432,7 +432,9 @@ def _detector_arguments(p: argparse.ArgumentParser) -> None:
                    help="videos: the full marker search every Nth frame only, the markers of the last frames "
                         "followed between (confirmed by the edge refinement and the cell read; one that fails is "
                         "dropped, and a frame where a quarter fail gets the full search); markers coming into "
-                        "view wait for the next full search (default 1: every frame)")
+                        "view wait for the next full search, except in localize: there the map's markers in the "
+                        "last fix's view are followed too, and the full search runs only when following fails "
+                        "(default 1: every frame)")
 
 
 #: sub-command -> (module of visloc.commands, function)

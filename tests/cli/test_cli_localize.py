@@ -31,7 +31,7 @@ def test_localize_a_rendered_flight(tmp_path, capsys):
 
 def test_localize_following_the_markers_between_full_searches(tmp_path):
     # --redetect-every 5: the fixes of the full search on every frame, within a twentieth of their
-    # error from the truth (markers coming into view join at the next full search)
+    # error from the truth (the map's markers in the last fix's view are followed too)
     src = tmp_path / "flight"
     assert main(["render", "localize", str(src), "--seconds", "0.5", "--fps", "30", "--seed", "3"]) == 0
     rows = {}

@@ -5,8 +5,20 @@ import pytest
 
 from visloc.markers import MarkerDetector, MarkerTracker
 from visloc.model.rigid_body import rotation_matrix
+from visloc.pose import Camera, markers_in_view
 from visloc.pose.maps import GridMap
 from visloc.sim import SIM_GRID, BottomCamera
+
+
+def _poses():
+    """The flight's body states and attitudes (state (12,), R (3, 3)) frame by frame."""
+    out = []
+    for k in range(40):
+        s = np.zeros(12)
+        s[0], s[1], s[2] = 0.05 * np.sin(k / 8), 0.004 * k, -1.0 - 0.1 * np.sin(k / 12)
+        s[6], s[8] = 0.02 * np.sin(k / 8), 0.004 * k
+        out.append((s, rotation_matrix(s[6:9])))
+    return out
 
 
 @pytest.fixture(scope="module")
@@ -14,13 +26,7 @@ def flight():
     """40 frames of the simulation's bottom camera over its marker grid, drifting, climbing,
     rocking and turning (up to about 2 px of marker motion per frame)."""
     cam = BottomCamera(GridMap(**SIM_GRID), "DICT_4X4_100", rng=np.random.default_rng(3))
-    frames = []
-    for k in range(40):
-        s = np.zeros(12)
-        s[0], s[1], s[2] = 0.05 * np.sin(k / 8), 0.004 * k, -1.0 - 0.1 * np.sin(k / 12)
-        s[6], s[8] = 0.02 * np.sin(k / 8), 0.004 * k
-        frames.append(cam.capture(s, rotation_matrix(s[6:9])))
-    return cam, frames
+    return cam, [cam.capture(s, R) for s, R in _poses()]
 
 
 def _by_id(dets):
@@ -127,3 +133,41 @@ def test_white_on_black_markers_are_followed_too(flight):
         assert got and set(got) <= set(full) and all(d.inverted for d in got.values())
         assert max(np.abs(d.corners - full[i].corners).max() for i, d in got.items()) < 0.02
     assert tracker.full_detections <= 4
+
+
+def test_expected_markers_join_at_once_and_replace_the_periodic_search(flight):
+    # each frame told the map's markers in the previous frame's true view: markers coming into
+    # view are followed from their first whole frame, and no full search runs after the first
+    cam, frames, poses = flight + (_poses(),)
+    lens = Camera(cam.K, size=cam.size)
+    detector = MarkerDetector(cam.dictionary, response="linear")
+    guided = MarkerTracker(MarkerDetector(cam.dictionary, response="linear"), redetect_every=10)
+    plain = MarkerTracker(MarkerDetector(cam.dictionary, response="linear"), redetect_every=10)
+    n_guided = n_plain = 0
+    for k, img in enumerate(frames):
+        expected = None if k == 0 else markers_in_view(cam.marker_map, lens, cam.pose(*poses[k - 1]))
+        full, got = _by_id(detector.detect(img)), _by_id(guided.detect(img, expected=expected))
+        assert set(got) <= set(full)
+        assert len(got) >= len(full) - 2  # at most those too near the edge to be followed
+        assert max(np.abs(d.corners - full[i].corners).max() for i, d in got.items()) < 0.02
+        n_guided += len(got)
+        n_plain += len(plain.detect(img))
+    # the first, and one on frame 1 if the zero-velocity guess was too far off (as without)
+    assert guided.full_detections <= 2 and plain.full_detections >= 4
+    assert n_guided > n_plain
+
+
+def test_an_expected_marker_that_is_not_there_costs_no_full_search(flight):
+    cam, frames = flight
+    tracker = MarkerTracker(MarkerDetector(cam.dictionary, response="linear"), redetect_every=3)
+    first = [tracker.detect(img) for img in frames[:3]][0]
+    before = tracker.full_detections
+    far = {99: first[0].corners + 40.0}  # an id printed nowhere near where it is said to be
+    for img in frames[3:9]:
+        got = tracker.detect(img, expected=far)
+        assert 99 not in {d.id for d in got} and len(got) >= len(first) - 3
+    assert tracker.full_detections == before  # 3 frames without, 6 with: no periodic search
+    with pytest.raises(ValueError, match="expected"):
+        tracker.detect(frames[9], expected={5: np.zeros((3, 2))})
+    with pytest.raises(ValueError, match="expected"):
+        tracker.detect(frames[9], expected={5: np.full((4, 2), np.nan)})

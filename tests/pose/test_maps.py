@@ -6,7 +6,7 @@ from scipy.spatial.transform import Rotation
 
 from visloc.markers import MarkerDetector
 from visloc.pose import Camera
-from visloc.pose.map_pose import estimate_camera_pose
+from visloc.pose.map_pose import estimate_camera_pose, markers_in_view
 from visloc.pose.maps import GridMap, MarkerMap
 from visloc.synth.grid import random_map_view
 from visloc.types import MarkerDetection, Pose
@@ -182,3 +182,43 @@ def test_a_map_records_its_dictionary_and_an_empty_map_is_refused(tmp_path):
     (tmp_path / "empty.yml").write_text("%YAML:1.0\nmarkers: []\n")
     with pytest.raises(ValueError, match="no markers"):
         MarkerMap.from_file(tmp_path / "empty.yml")
+
+
+def test_markers_in_view_are_the_whole_ones_projected():
+    g = GridMap(6, 6, 0.1, 0.05)
+    R_map_cam = Rotation.from_euler("xyz", [178, 4, 20], degrees=True).as_matrix()
+    pos = np.array([0.45, -0.4, 0.55])  # low: part of the grid is out of view
+    pose = Pose(R_map_cam.T, -R_map_cam.T @ pos)
+    seen = markers_in_view(g, CAM, pose)
+    whole = {}
+    for i in g.ids:
+        q = g.corners_of(i) @ pose.R.T + pose.t
+        px = (q[:, :2] / q[:, 2:]) @ K[:2, :2].T + K[:2, 2]
+        if (px >= 0).all() and (px <= [319, 239]).all():
+            whole[int(i)] = px
+    assert 0 < len(whole) < len(g.ids)  # some whole, some cut by the frame's edge
+    assert sorted(seen) == sorted(whole)
+    assert all(np.allclose(seen[i], whole[i], atol=1e-9) for i in whole)
+    edge = {i: min(q.min(), (np.array([319, 239]) - q).min()) for i, q in whole.items()}  # px from the edge
+    margin = 0.5 * (min(edge.values()) + max(edge.values()))
+    assert sorted(markers_in_view(g, CAM, pose, margin=margin)) == sorted(i for i, e in edge.items() if e >= margin)
+    up = R_map_cam @ np.diag([1.0, -1.0, -1.0])  # the same camera looking up, away from the floor
+    behind = Pose(up.T, -up.T @ pos)
+    assert markers_in_view(g, CAM, behind) == {}
+
+
+def test_markers_in_view_through_a_lens_and_bad_arguments():
+    g = GridMap(4, 4, 0.1, 0.05)
+    lens = Camera(K, dist=[-0.25, 0.08, 0.0, 0.0, 0.0], size=(320, 240))
+    R_map_cam = Rotation.from_euler("xyz", [180, 0, 10], degrees=True).as_matrix()
+    pose = Pose(R_map_cam.T, -R_map_cam.T @ np.array([0.275, -0.275, 0.9]))
+    seen = markers_in_view(g, lens, pose)
+    assert len(seen) == 16
+    for i, q in seen.items():
+        assert np.allclose(q, lens.project_object(g.corners_of(i), pose), atol=1e-9)
+    with pytest.raises(TypeError, match="pose"):
+        markers_in_view(g, lens, np.eye(4))
+    with pytest.raises(ValueError, match="size"):
+        markers_in_view(g, Camera(K), pose)
+    with pytest.raises(ValueError, match="margin"):
+        markers_in_view(g, lens, pose, margin=-1.0)

@@ -85,12 +85,14 @@ def localize(args: argparse.Namespace) -> int:
     from visloc.estimation.fusion import MapFixFusion
     from visloc.io import CsvWriter
     from visloc.io.mavlink import MavlinkSink
-    from visloc.pose.map_pose import estimate_camera_pose
+    from visloc.markers import MarkerTracker
+    from visloc.pose.map_pose import estimate_camera_pose, markers_in_view
     from visloc.pose.maps import MarkerMap
 
     mmap = MarkerMap.from_file(args.map)
     dictionary_for(args, "localize", mmap)
     find = finder_for(detector_for(args), args)
+    tracker = find.__self__ if isinstance(getattr(find, "__self__", None), MarkerTracker) else None
     camera = Camera.from_file(args.camera)
     truth = None
     if args.truth:
@@ -120,7 +122,12 @@ def localize(args: argparse.Namespace) -> int:
                     out.write(row | {"fix": "unreadable"})
                 continue
             cam = camera_for(camera, frame.image.shape, warned, "localize")
-            mp = estimate_camera_pose(find(frame.image), mmap, cam, start=last_pose)  # from the last fix
+            if tracker is not None and last_pose is not None:  # the map's markers in the last fix's view too
+                h, w = frame.image.shape[:2]
+                dets = tracker.detect(frame.image, expected=markers_in_view(mmap, cam, last_pose, size=(w, h)))
+            else:
+                dets = find(frame.image)
+            mp = estimate_camera_pose(dets, mmap, cam, start=last_pose)  # from the last fix
             last_pose = None if mp is None else mp.pose
             force = None
             if imu is not None and R_map_cam is not None and last_t is not None:

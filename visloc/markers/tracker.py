@@ -20,9 +20,10 @@ exactly :meth:`~visloc.markers.MarkerDetector.detect`'s. A followed marker is kn
 from __future__ import annotations
 
 import numbers
+from collections.abc import Mapping
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from visloc.markers.binarize import to_gray
 from visloc.markers.detector import MarkerDetector
@@ -77,27 +78,43 @@ class MarkerTracker:
         """Forget the markers followed so far: the next frame runs a full detection."""
         self._last, self._before, self._since = {}, {}, 0
 
-    def detect(self, image: NDArray[np.uint8]) -> list[MarkerDetection]:
+    def detect(self, image: NDArray[np.uint8], *, expected: Mapping[int, ArrayLike] | None = None
+               ) -> list[MarkerDetection]:
         """The markers of the next frame of the video.
 
         Parameters
         ----------
         image : ndarray (H, W) or (H, W, 3) uint8
             The frame, grey or BGR; frames come in the video's order.
+        expected : mapping of int to array_like (4, 2), optional
+            Markers known to be in view from elsewhere: id -> corners (px, clockwise from the
+            marker's own top-left corner) *in the previous frame*, e.g. a marker map's
+            markers projected through the previous frame's camera pose
+            (:func:`visloc.pose.markers_in_view`). Those not followed yet are tried as if
+            found in the previous frame (moved by the affine motion of the followed markers'
+            last step), of the polarity the detector looks for (white on black only for
+            ``inverted=True``). With ``expected`` given, markers coming into view come from it
+            and no periodic full detection runs: one runs only when nothing is followed or
+            fewer than ``keep`` of the followed markers confirm. A failed expected marker
+            costs nothing else.
 
         Returns
         -------
         list of MarkerDetection
-            Sorted by id: a full detection's, or the followed markers that confirmed.
+            Sorted by id: a full detection's, or the followed and expected markers that
+            confirmed.
 
         Raises
         ------
         ValueError
-            An image that is not uint8 grey or BGR.
+            An image that is not uint8 grey or BGR; ``expected`` corners that are not (4, 2)
+            finite numbers.
         """
         gray = to_gray(image)
+        new = self._new_expected(expected)
         self.frames += 1
-        dets = self._follow(gray) if self._last and self._since < self.redetect_every - 1 else None
+        periodic = expected is None and self._since >= self.redetect_every - 1
+        dets = self._follow(gray, new) if self._last and not periodic else None
         if dets is None:
             dets = self.detector.detect(gray)
             self.full_detections += 1
@@ -108,44 +125,64 @@ class MarkerTracker:
         self._before, self._last = self._last, now
         return dets
 
-    def _follow(self, gray: NDArray[np.uint8]) -> list[MarkerDetection] | None:
-        """The followed markers confirmed in ``gray``; None if fewer than ``keep`` of those
-        inside the image confirmed, or none did."""
+    def _new_expected(self, expected: Mapping[int, ArrayLike] | None) -> dict[tuple[int, bool], NDArray]:
+        """The expected markers not followed yet, keyed as the followed ones."""
+        if expected is None:
+            return {}
+        polarity = self.detector.params.inverted is True
+        new: dict[tuple[int, bool], NDArray] = {}
+        for marker_id, corners in expected.items():
+            q = np.asarray(corners, dtype=np.float64)
+            if q.shape != (4, 2) or not np.isfinite(q).all():
+                raise ValueError(f"expected[{marker_id!r}]: corners must be (4, 2) finite numbers, got shape {q.shape}")
+            key = (int(marker_id), polarity)
+            if key not in self._last:
+                new[key] = q
+        return new
+
+    def _follow(self, gray: NDArray[np.uint8], new: dict[tuple[int, bool], NDArray]) -> list[MarkerDetection] | None:
+        """The followed markers (and the ``new`` expected ones) confirmed in ``gray``; None if
+        fewer than ``keep`` of the followed markers inside the image confirmed, or none of all."""
         h, w = gray.shape[:2]
         margin = self.detector.params.candidates.border_distance + 1.0
+        last = {**new, **self._last}
         dets: list[MarkerDetection] = []
-        tried = 0
+        tried = confirmed = 0
         for inverted in (False, True):
-            keys = [k for k in self._last if k[1] is inverted]
+            keys = [k for k in last if k[1] is inverted]
             if not keys:
                 continue
-            quads = self._predicted(keys)
+            quads = self._predicted(keys, last)
             inside = ((quads >= margin) & (quads <= np.array([w - 1, h - 1]) - margin)).all(axis=(1, 2))
             if not inside.any():
                 continue
             got = self.detector.confirm(gray, quads[inside], np.array([k[0] for k in keys])[inside],
                                         inverted=inverted)
-            tried += len(got)
-            dets.extend(d for d in got if d is not None)
-        if not dets or len(dets) < self.keep * tried:
+            for key, d in zip([k for k, i in zip(keys, inside.tolist(), strict=True) if i], got, strict=True):
+                followed = key in self._last
+                tried += followed
+                confirmed += followed and d is not None
+                if d is not None:
+                    dets.append(d)
+        if not dets or confirmed < self.keep * tried:
             return None
         return sorted(dets, key=lambda d: (d.id, d.corners[0, 1], d.corners[0, 0]))
 
-    def _predicted(self, keys: list[tuple[int, bool]]) -> NDArray:
-        """Where followed markers' corners (K, 4, 2) should be now: on at the velocity of their
-        last step; a marker found only in the last frame moves by the affine motion that took
-        the others' corners through their last step (least squares; fewer than two others: it
-        stays)."""
-        last = np.array([self._last[k] for k in keys])
+    def _predicted(self, keys: list[tuple[int, bool]], last: dict[tuple[int, bool], NDArray]) -> NDArray:
+        """Where the markers ``keys`` (corners in the last frame: ``last``) should be now (K, 4,
+        2): on at the velocity of their last step; a marker found only in the last frame moves
+        by the affine motion that took the others' corners through their last step (least
+        squares; fewer than two others: it stays)."""
+        now = np.array([last[k] for k in keys])
         seen = np.array([k in self._before for k in keys])
         if not seen.any():
-            return last
+            return now
         before = np.array([self._before[k] for k, s in zip(keys, seen, strict=True) if s])
-        pred = last.copy()
-        pred[seen] = 2.0 * last[seen] - before
+        pred = now.copy()
+        pred[seen] = 2.0 * now[seen] - before
         if not seen.all() and seen.sum() >= 2:
             a = before.reshape(-1, 2)
-            affine = np.linalg.lstsq(np.hstack([a, np.ones((len(a), 1))]), last[seen].reshape(-1, 2), rcond=None)[0]
-            new = last[~seen].reshape(-1, 2)
+            affine = np.linalg.lstsq(np.hstack([a, np.ones((len(a), 1))]), now[seen].reshape(-1, 2), rcond=None)[0]
+            new = now[~seen].reshape(-1, 2)
             pred[~seen] = (np.hstack([new, np.ones((len(new), 1))]) @ affine).reshape(-1, 4, 2)
         return pred

@@ -6,7 +6,7 @@
 
 from visloc.pose.camera import Camera
 from visloc.pose.gauss_newton import refine_params
-from visloc.pose.map_pose import MapPose, estimate_camera_pose
+from visloc.pose.map_pose import MapPose, estimate_camera_pose, markers_in_view
 from visloc.pose.maps import GridMap, MarkerMap
 from visloc.pose.marker_pose import estimate_marker_pose, is_flip, pose_error, yaw_seed_start
 from visloc.pose.planar import marker_object_points, planar_solutions, yaw_seeds
@@ -22,6 +22,7 @@ __all__ = [
     "euler_to_matrix",
     "is_flip",
     "marker_object_points",
+    "markers_in_view",
     "matrix_to_euler",
     "planar_solutions",
     "pose_error",

@@ -27,7 +27,7 @@ from visloc.pose.planar import planar_solutions
 from visloc.pose.rotations import euler_to_matrix, matrix_to_euler
 from visloc.types import MarkerDetection, Pose
 
-__all__ = ["MapPose", "estimate_camera_pose"]
+__all__ = ["MapPose", "estimate_camera_pose", "markers_in_view"]
 
 FloatArray = NDArray[np.float64]
 
@@ -276,3 +276,65 @@ def _covariance(M: FloatArray, n_residuals: int, pixel_sigma: float | None) -> F
         return None
     cov = var * 0.5 * (inv + inv.T)
     return cov if np.isfinite(cov).all() and (np.diag(cov) > 0).all() else None
+
+
+def markers_in_view(marker_map: MarkerMap, camera: Camera, pose: Pose, *, size: tuple[int, int] | None = None,
+                    margin: float = 0.0) -> dict[int, FloatArray]:
+    """The map's markers that a camera at ``pose`` sees whole, and where: what a
+    :class:`visloc.markers.MarkerTracker` may be told to expect
+    (``tracker.detect(image, expected=markers_in_view(map, camera, last_pose))``).
+
+    Parameters
+    ----------
+    marker_map : MarkerMap
+        The markers, corners in the map frame.
+    camera : Camera
+        Intrinsics (with distortion).
+    pose : Pose
+        ``T_cam_map`` (``p_cam = R @ p_map + t``), e.g. the previous frame's
+        :attr:`MapPose.pose`.
+    size : (int, int), optional
+        ``(width, height)`` of the image, px (default ``camera.size``).
+    margin : float
+        Least distance of every corner from the image's edge pixels, px (>= 0).
+
+    Returns
+    -------
+    dict of int to ndarray (4, 2)
+        Marker id -> its corners in the image, px, in the map's corner order (the marker's
+        own top-left corner first), for every marker whose four corners lie in front of the
+        camera and ``margin`` inside the image.
+
+    Raises
+    ------
+    TypeError
+        ``marker_map``, ``camera`` or ``pose`` of the wrong type.
+    ValueError
+        No ``size`` given and none in ``camera``; a negative or non-finite ``margin``.
+    """
+    if not isinstance(marker_map, MarkerMap):
+        raise TypeError(f"marker_map: expected a MarkerMap, got {type(marker_map).__name__}")
+    if not isinstance(camera, Camera):
+        raise TypeError(f"camera: expected a Camera, got {type(camera).__name__}")
+    if not isinstance(pose, Pose):
+        raise TypeError(f"pose: expected a Pose, got {type(pose).__name__}")
+    w, h = size if size is not None else camera.size or (0, 0)
+    if w <= 0 or h <= 0:
+        raise ValueError("size: give the image's (width, height); the camera has no size")
+    if not (isinstance(margin, (int, float)) and np.isfinite(margin) and margin >= 0):
+        raise ValueError(f"margin must be a finite number >= 0, got {margin!r}")
+    ids, obj = marker_map.stacked
+    pc = obj.reshape(-1, 3) @ pose.R.T + pose.t  # (4M, 3)
+    front = pc[:, 2] > 1e-6
+    z = np.where(front, pc[:, 2], 1.0)
+    px = pc[:, :2] / z[:, None] * np.array([camera.fx, camera.fy]) + np.array([camera.cx, camera.cy])
+    if camera.has_distortion:  # only the markers whose pinhole image is near the frame: a distortion
+        # polynomial far outside its calibrated field can fold points back into the image
+        near = (front & (np.abs(px - 0.5 * np.array([w, h])) <= np.array([w, h])).all(axis=1)).reshape(-1, 4).all(axis=1)
+        front = np.repeat(near, 4)
+        if near.any():
+            px[front] = camera.project(pc[front])
+    inside = (front & (px >= margin).all(axis=1) & (px <= np.array([w - 1.0, h - 1.0]) - margin).all(axis=1))
+    whole = inside.reshape(-1, 4).all(axis=1)
+    quads = px.reshape(-1, 4, 2)
+    return {i: quads[k] for k, i in zip(np.flatnonzero(whole).tolist(), ids[whole].tolist(), strict=True)}

@@ -12,6 +12,7 @@ A map is saved as OpenCV FileStorage YAML::
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -93,6 +94,15 @@ class MarkerMap:
         if dup:
             raise ValueError(f"duplicate marker ids in the map: {dup}")
         return cls({int(i): c for i, c in markers}, dictionary)
+
+    @cached_property
+    def stacked(self) -> tuple[NDArray[np.int64], FloatArray]:
+        """``(ids (M,), corners (M, 4, 3))``: every marker at once, ids sorted (built once)."""
+        ids = self.ids
+        corners = np.stack([self.corners[int(i)] for i in ids]) if len(ids) else np.zeros((0, 4, 3))
+        corners.setflags(write=False)
+        ids.setflags(write=False)
+        return ids, corners
 
     @property
     def ids(self) -> NDArray[np.int64]:

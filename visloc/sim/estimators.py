@@ -29,7 +29,7 @@ from visloc.markers.detector import MarkerDetector
 from visloc.markers.tracker import MarkerTracker
 from visloc.model.rigid_body import euler_rate_matrix, rotation_matrix
 from visloc.pose.camera import Camera
-from visloc.pose.map_pose import estimate_camera_pose
+from visloc.pose.map_pose import estimate_camera_pose, markers_in_view
 from visloc.pose.rotations import matrix_to_euler
 from visloc.sim.sensors import MAP_FROM_NED, BottomCamera
 from visloc.types import FloatArray, Pose
@@ -136,7 +136,9 @@ class VisionEstimator:
         self.fusion.predict(t, accel, rotation_matrix(self.lam), gravity=(0.0, 0.0, self.g), accel_std=self.accel_std)
 
     def _visloc_fix(self, image: NDArray[np.uint8]) -> tuple[Pose, FloatArray | None] | None:
-        fix = estimate_camera_pose(self.tracker.detect(image), self.camera.marker_map,
+        expected = None if self._last_pose is None else markers_in_view(  # the map's markers in the last view
+            self.camera.marker_map, self.intrinsics, self._last_pose, size=self.camera.size)
+        fix = estimate_camera_pose(self.tracker.detect(image, expected=expected), self.camera.marker_map,
                                    self.intrinsics, start=self._last_pose)  # from the last frame's pose
         self._last_pose = None if fix is None else fix.pose
         return None if fix is None else (fix.pose, fix.position_covariance)

@@ -4,8 +4,9 @@
   ``height dip``, the linear model's figures) and the wall-clock speed as simulated seconds
   per second (``realtime_factor``), pinned to one CPU core with OpenCV single-threaded.
 - ``hover-vision`` three ways on the same seed: the vision front end is visloc's
-  (``MarkerTracker``: a full ``MarkerDetector`` search every 10 frames, the markers followed
-  between; then ``estimate_camera_pose``), visloc's with the full search on every frame, or
+  (``MarkerTracker``: the markers followed from frame to frame, the map's markers in the last
+  fix's view joining at once, a full ``MarkerDetector`` search only when following fails; then
+  ``estimate_camera_pose``), visloc's with the full search on every frame, or
   OpenCV's route (``cv2.aruco.ArucoDetector``
   with default parameters + ``cv2.solvePnP`` over all board corners), both into the same IMU
   Kalman filter and controller: position RMS from the set point, estimate error, speed.
@@ -212,7 +213,8 @@ def markdown(result) -> str:
         (f"One CPU core (affinity {result['cpus']}), OpenCV threads 1. Default controller "
         "(`ControlSpecs()`), RK4 at 200 Hz (one step per control period), control and IMU at 200 Hz, "
         "bottom camera 320x240 at 30 Hz over a 10 x 10 DICT_4X4_100 grid (hover-vision, light turbulence; "
-        "visloc's front end: full detection every 10 frames, markers followed between, unless said; the two "
+        "visloc's front end: the markers followed from frame to frame, the map's markers in the last fix's view "
+        "joining at once, a full detection only when following fails, unless said; the two "
         "'true pose' rows take the marker vision out, each fix the camera's true pose, to show the loop's own "
         f"speed with the frames rendered and without; each hover-vision row's x real time is the median of "
         f"{ROUNDS} interleaved runs of the same flight, their range in brackets). Settling: 5 % band "

@@ -381,8 +381,9 @@ def _add_sim(sub: argparse._SubParsersAction) -> None:
     sm.add_argument("--camera-rate", type=_positive, default=30.0, metavar="HZ",
                     help="bottom-camera rate for hover-vision (default 30)")
     sm.add_argument("--redetect-every", type=_count, default=10, metavar="N",
-                    help="vision scenarios: a full marker detection every N camera frames, the markers followed "
-                         "between (default 10; 1: the full detection on every frame)")
+                    help="vision scenarios: N > 1 follows the markers from frame to frame, the map's markers in "
+                         "the last fix's view joining at once, with a full marker detection only when following "
+                         "fails (any N > 1 alike); 1: the full detection on every frame (default 10)")
     sm.add_argument("--motor-lag", type=float, default=0.0, metavar="S",
                     help="first-order motor time constant, s (report eq. 2.13; default 0)")
     sm.add_argument("--out", metavar="RUN.csv", help="write time, state, estimate, set point, pwm per control step")
@@ -433,8 +434,8 @@ def _detector_arguments(p: argparse.ArgumentParser) -> None:
                         "followed between (confirmed by the edge refinement and the cell read; one that fails is "
                         "dropped, and a frame where a quarter fail gets the full search); markers coming into "
                         "view wait for the next full search, except in localize: there the map's markers in the "
-                        "last fix's view are followed too, and the full search runs only when following fails "
-                        "(default 1: every frame)")
+                        "last fix's view are followed too, and the full search runs only when following fails, "
+                        "whatever N > 1 (default 1: every frame)")
 
 
 #: sub-command -> (module of visloc.commands, function)

@@ -160,7 +160,9 @@ def test_expected_markers_join_at_once_and_replace_the_periodic_search(flight):
 def test_an_expected_marker_that_is_not_there_costs_no_full_search(flight):
     cam, frames = flight
     tracker = MarkerTracker(MarkerDetector(cam.dictionary, response="linear"), redetect_every=3)
-    first = [tracker.detect(img) for img in frames[:3]][0]
+    first = tracker.detect(frames[0])
+    for img in frames[1:3]:
+        tracker.detect(img)
     before = tracker.full_detections
     far = {99: first[0].corners + 40.0}  # an id printed nowhere near where it is said to be
     for img in frames[3:9]:
@@ -171,3 +173,13 @@ def test_an_expected_marker_that_is_not_there_costs_no_full_search(flight):
         tracker.detect(frames[9], expected={5: np.zeros((3, 2))})
     with pytest.raises(ValueError, match="expected"):
         tracker.detect(frames[9], expected={5: np.full((4, 2), np.nan)})
+
+
+def test_redetect_every_frame_stays_the_detector_when_told_what_to_expect(flight):
+    cam, frames = flight
+    lens = Camera(cam.K, size=cam.size)
+    tracker = MarkerTracker(MarkerDetector(cam.dictionary, response="linear"), redetect_every=1)
+    poses = _poses()
+    for k, img in enumerate(frames[:4]):
+        tracker.detect(img, expected=markers_in_view(cam.marker_map, lens, cam.pose(*poses[max(k - 1, 0)])))
+    assert tracker.full_detections == 4

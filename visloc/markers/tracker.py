@@ -95,8 +95,9 @@ class MarkerTracker:
             last step), of the polarity the detector looks for (white on black only for
             ``inverted=True``). With ``expected`` given, markers coming into view come from it
             and no periodic full detection runs: one runs only when nothing is followed or
-            fewer than ``keep`` of the followed markers confirm. A failed expected marker
-            costs nothing else.
+            fewer than ``keep`` of the followed markers confirm (or on every frame with
+            ``redetect_every=1``, the detector alone). A failed expected marker costs nothing
+            else.
 
         Returns
         -------
@@ -113,7 +114,7 @@ class MarkerTracker:
         gray = to_gray(image)
         new = self._new_expected(expected)
         self.frames += 1
-        periodic = expected is None and self._since >= self.redetect_every - 1
+        periodic = self._since >= self.redetect_every - 1 if expected is None else self.redetect_every == 1
         dets = self._follow(gray, new) if self._last and not periodic else None
         if dets is None:
             dets = self.detector.detect(gray)

@@ -2,8 +2,9 @@
 
 - :class:`TruthEstimator`: the true state (the report's linear-design setting).
 - :class:`VisionEstimator`: visloc's own pipeline. Each bottom-camera image goes through
-  :class:`visloc.markers.MarkerTracker` (the detector's full search every ``redetect_every``
-  frames, the markers of the previous frames followed between) and :func:`visloc.pose.estimate_camera_pose` (the
+  :class:`visloc.markers.MarkerTracker` (the markers of the previous frames followed, and the
+  map's markers in the last fix's view, :func:`visloc.pose.markers_in_view`; the detector's
+  full search when following fails) and :func:`visloc.pose.estimate_camera_pose` (the
   report's marker grid, §3.2.2); the camera-centre fix corrects the Kalman filter of
   :class:`visloc.estimation.fusion.MapFixFusion` (filterpy inside) that integrates the
   accelerometer, rotated into the inertial frame, at the IMU rate. The attitude integrates the gyro (report eq. 2.3)
@@ -75,9 +76,10 @@ class VisionEstimator:
     fix_std : float
         Standard deviation of a fix without covariance, m.
     redetect_every : int
-        visloc's front end: a full marker detection at least every this many frames, the
-        markers followed from frame to frame between (:class:`visloc.markers.MarkerTracker`;
-        1: the full detection on every frame).
+        visloc's front end (:class:`visloc.markers.MarkerTracker`): above 1 the markers are
+        followed from frame to frame, the map's markers in the last fix's view joining at once
+        (:func:`visloc.pose.markers_in_view`), with a full marker detection only when following
+        fails; 1: the full detection on every frame.
 
     Attributes
     ----------

@@ -191,9 +191,9 @@ def simulate(
         unbounded, the report's controller before that bound (large set-point steps tip it
         over).
     redetect_every : int
-        visloc's vision front end: a full marker detection at least every this many camera
-        frames, the markers followed from frame to frame between
-        (:class:`visloc.markers.MarkerTracker`); 1: the full detection on every frame.
+        visloc's vision front end (:class:`VisionEstimator`): above 1 the markers followed
+        from frame to frame, the map's markers in the last fix's view joining at once, a full
+        marker detection only when following fails; 1: the full detection on every frame.
 
     Returns
     -------

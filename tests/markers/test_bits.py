@@ -108,3 +108,28 @@ def test_cell_reads_refuse_corners_that_are_not_finite(native):
     quad = np.array([[[10.0, 10.0], [50.0, 10.0], [50.0, np.nan], [10.0, 50.0]]])
     with pytest.raises(ValueError, match="finite"):
         read_cells(np.zeros((60, 60), np.uint8), quad, 6, native=native)
+
+
+def test_compiled_sampling_maps_are_the_numpy_maps():
+    # the compiled maps (SSE four points at a time where there is SSE) are bits._map_points'
+    # single-precision operations: the same maps, so the same samples, degenerate quads too
+    from visloc.markers.bits import NATIVE_CELLS, _area_grid, _map_points, cell_white_fractions
+
+    if not NATIVE_CELLS:
+        pytest.skip("visloc.markers._cells was not built (no C compiler at install)")
+    from visloc.markers import _cells
+
+    rng = np.random.default_rng(11)
+    quads = rng.uniform(-40, 360, (40, 4, 2))
+    quads[0] = [[5, 5], [5, 5], [5, 5], [5, 5]]  # all corners at one point
+    quads[1] = quads[1][[0, 2, 1, 3]]  # self-intersecting
+    for uv1 in (_area_grid(6, 4, 0.13), _area_grid(7, 5, 0.0)):  # 576 and 1225 points (a scalar tail)
+        mx, my = (np.frombuffer(a, np.float32).reshape(len(quads), -1) for a in _cells.quad_maps(
+            np.ascontiguousarray(quads), len(quads), np.ascontiguousarray(uv1[:2]), uv1.shape[1]))
+        want_x, want_y = _map_points(quads, uv1)
+        assert np.array_equal(mx, want_x, equal_nan=True) and np.array_equal(my, want_y, equal_nan=True)
+    image = rng.integers(0, 256, (240, 320), dtype=np.uint8)
+    thr = rng.uniform(60, 200, len(quads))
+    for n, per_side in ((6, 4), (10, 32)):  # 102400 points a marker: OpenCV's maps in pieces
+        a, b = (cell_white_fractions(image, quads[2:6], n, thr[2:6], per_side=per_side, native=e) for e in (True, False))
+        assert a.shape == (4, n, n) and np.array_equal(a, b)

@@ -9,6 +9,15 @@
  * read_samples(samples, ring, K, n, m, border, border_error_rate, min_contrast, min_quiet_zone)
  *     -> (valid, bits, margin|contrast|threshold)
  *     samples: K x n x n x m uint8; ring: K x (4 n + 4) float64.
+ *
+ * And the maps of the cells' samples (bits.sample_cells and bits.cell_white_fractions read them
+ * with cv2.remap):
+ *
+ * quad_maps(quads, K, uv, P) -> (mx, my)
+ *     the image points of the P unit-square points uv (2 x P float32: the u row, then the v
+ *     row) on each quad (K x 4 x 2 float64), K x P float32 each: bits.square_to_quad in double
+ *     precision, cast to float, the points mapped in single precision as bits._map_points maps
+ *     them, operation for operation: the same maps.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -16,6 +25,9 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#if defined(__SSE2__) || defined(_M_X64)
+#include <emmintrin.h>
+#endif
 
 static int cmp_double(const void *a, const void *b) {
     double x = *(const double *)a, y = *(const double *)b;
@@ -141,15 +153,90 @@ static PyObject *read_samples(PyObject *self, PyObject *args) {
     return result;
 }
 
+/* bits.square_to_quad of one quad q[8] ((x, y) of its corners 0-3), its operations in their order,
+ * cast to single precision as bits._map_points casts it. */
+static void square_to_quad(const double *q, float H[9]) {
+    double x0 = q[0], y0 = q[1], x1 = q[2], y1 = q[3], x2 = q[4], y2 = q[5], x3 = q[6], y3 = q[7];
+    double dx1 = x1 - x2, dx2 = x3 - x2, dx3 = x0 - x1 + x2 - x3;
+    double dy1 = y1 - y2, dy2 = y3 - y2, dy3 = y0 - y1 + y2 - y3;
+    double den = dx1 * dy2 - dx2 * dy1;
+    if (fabs(den) < 1e-12) den = 1e-12;
+    double g = (dx3 * dy2 - dx2 * dy3) / den, h = (dx1 * dy3 - dx3 * dy1) / den;
+    H[0] = (float)(x1 - x0 + g * x1);
+    H[1] = (float)(x3 - x0 + h * x3);
+    H[2] = (float)x0;
+    H[3] = (float)(y1 - y0 + g * y1);
+    H[4] = (float)(y3 - y0 + h * y3);
+    H[5] = (float)y0;
+    H[6] = (float)g;
+    H[7] = (float)h;
+    H[8] = 1.0f;
+}
+
+/* The image points of the P unit-square points (u[p], v[p]) under H into mx, my:
+ * ((h0 u + h1 v) + h2) / ((h6 u + h7 v) + h8) and the same for y, in single precision, four
+ * points at a time with SSE where there is SSE (each lane the scalar operations). */
+static void map_points(const float H[9], const float *u, const float *v, Py_ssize_t P, float *mx, float *my) {
+    Py_ssize_t p = 0;
+#if defined(__SSE2__) || defined(_M_X64)
+    const __m128 h0 = _mm_set1_ps(H[0]), h1 = _mm_set1_ps(H[1]), h2 = _mm_set1_ps(H[2]);
+    const __m128 h3 = _mm_set1_ps(H[3]), h4 = _mm_set1_ps(H[4]), h5 = _mm_set1_ps(H[5]);
+    const __m128 h6 = _mm_set1_ps(H[6]), h7 = _mm_set1_ps(H[7]), h8 = _mm_set1_ps(H[8]);
+    for (; p + 4 <= P; p += 4) {
+        __m128 a = _mm_loadu_ps(u + p), b = _mm_loadu_ps(v + p);
+        __m128 zn = _mm_add_ps(_mm_add_ps(_mm_mul_ps(h6, a), _mm_mul_ps(h7, b)), h8);
+        _mm_storeu_ps(mx + p, _mm_div_ps(_mm_add_ps(_mm_add_ps(_mm_mul_ps(h0, a), _mm_mul_ps(h1, b)), h2), zn));
+        _mm_storeu_ps(my + p, _mm_div_ps(_mm_add_ps(_mm_add_ps(_mm_mul_ps(h3, a), _mm_mul_ps(h4, b)), h5), zn));
+    }
+#endif
+    for (; p < P; p++) {
+        float zn = H[6] * u[p] + H[7] * v[p] + H[8];
+        mx[p] = (H[0] * u[p] + H[1] * v[p] + H[2]) / zn;
+        my[p] = (H[3] * u[p] + H[4] * v[p] + H[5]) / zn;
+    }
+}
+
+static PyObject *quad_maps(PyObject *self, PyObject *args) {
+    (void)self;
+    Py_buffer quads, uv;
+    Py_ssize_t K, P;
+    if (!PyArg_ParseTuple(args, "y*ny*n", &quads, &K, &uv, &P)) return NULL;
+    PyObject *mx = NULL, *my = NULL, *result = NULL;
+    if (K < 0 || P < 0 || quads.len != K * 8 * (Py_ssize_t)sizeof(double) || uv.len != 2 * P * (Py_ssize_t)sizeof(float)) {
+        PyErr_SetString(PyExc_ValueError, "quad_maps: expected K x 4 x 2 float64 quads and 2 x P float32 points");
+    } else if ((mx = PyBytes_FromStringAndSize(NULL, K * P * (Py_ssize_t)sizeof(float))) != NULL &&
+               (my = PyBytes_FromStringAndSize(NULL, K * P * (Py_ssize_t)sizeof(float))) != NULL) {
+        const double *q = (const double *)quads.buf;
+        const float *u = (const float *)uv.buf, *v = u + P;
+        float *ox = (float *)PyBytes_AS_STRING(mx), *oy = (float *)PyBytes_AS_STRING(my);
+        Py_BEGIN_ALLOW_THREADS
+        for (Py_ssize_t k = 0; k < K; k++) {
+            float H[9];
+            square_to_quad(q + 8 * k, H);
+            map_points(H, u, v, P, ox + k * P, oy + k * P);
+        }
+        Py_END_ALLOW_THREADS
+        result = Py_BuildValue("(OO)", mx, my);
+    }
+    Py_XDECREF(mx);
+    Py_XDECREF(my);
+    PyBuffer_Release(&quads);
+    PyBuffer_Release(&uv);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"read_samples", read_samples, METH_VARARGS,
      "read_samples(samples, ring, K, n, m, border, border_error_rate, min_contrast, min_quiet_zone)\n"
      "-> (valid, bits, margin|contrast|threshold)\n\n"
      "bits.read_bits (shading off) on sampled cells; see visloc.markers.bits.read_cells."},
+    {"quad_maps", quad_maps, METH_VARARGS,
+     "quad_maps(quads, K, uv, P) -> (mx, my)\n\n"
+     "Image points (K x P float32 each) of unit-square points on each quad; see visloc.markers.bits._map_points."},
     {NULL, NULL, 0, NULL},
 };
 
-static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_cells", "Stage 9: reading sampled cells into bits.", -1,
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_cells", "Stage 9: the maps of the cells' samples, and their read into bits.", -1,
                                     methods, NULL, NULL, NULL, NULL};
 
 PyMODINIT_FUNC PyInit__cells(void) { return PyModule_Create(&module); }

@@ -12,7 +12,8 @@ bits are mostly black still has a white class. A cell's bit is the majority of i
 (the fraction of white samples, as OpenCV counts the white pixels of each cell), so a stain,
 a reflection or a printing flaw over part of a cell does not flip it. All functions work on a
 batch of K candidates at once (one OpenCV remap per call). Compiled code
-(``visloc.markers._cells``, built with the package) reads the sampled cells into bits
+(``visloc.markers._cells``, built with the package) computes the remap's maps (the numpy
+version's single-precision operations: the same maps) and reads the sampled cells into bits
 (:func:`read_cells`), with :func:`read_bits` as the fallback: the same operations in the same
 order, the same bits.
 """
@@ -124,15 +125,38 @@ def _unit_grid(n: int, per_side: int) -> NDArray[np.float64]:
 
 def _map_points(quads: NDArray, uv1: NDArray[np.float32]) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
     """Image x and y (K, P) of the unit-square points ``uv1`` (3, P: u, v, 1) on each quad (K, 4, 2),
-    through :func:`square_to_quad` in single precision (``cv2.remap``'s maps)."""
-    hom = (square_to_quad(quads).reshape(-1, 3).astype(np.float32) @ uv1).reshape(len(quads), 3, -1)
+    through :func:`square_to_quad` in single precision (``cv2.remap``'s maps), each coordinate
+    ``(h0 u + h1 v) + h2`` over ``(h6 u + h7 v) + h8`` as the compiled sampler computes it."""
+    H = square_to_quad(quads).astype(np.float32)[:, :, :, None]  # (K, 3, 3, 1)
+    hom = H[:, :, 0] * uv1[0] + H[:, :, 1] * uv1[1] + H[:, :, 2]  # (K, 3, P)
     return hom[:, 0] / hom[:, 2], hom[:, 1] / hom[:, 2]
+
+
+def _read_points(gray: NDArray[np.uint8], quads: NDArray, uv1: NDArray[np.float32],
+                 native: bool | None) -> NDArray[np.uint8]:
+    """Grey levels (K, P) at the unit-square points ``uv1`` (3, P) of each quad (K, 4, 2),
+    read by ``cv2.remap`` (bilinear, the image's edge pixels repeated beyond it) through the
+    maps of :func:`_map_points`, computed by compiled code (``_cells.quad_maps``, the same
+    maps) unless ``native`` is False or it was not built."""
+    k, n_points = len(quads), uv1.shape[1]
+    if use_compiled(native, _cells, "visloc.markers._cells"):
+        mx, my = (np.frombuffer(a, np.float32).reshape(k, n_points) for a in _cells.quad_maps(
+            np.ascontiguousarray(quads, np.float64), k, np.ascontiguousarray(uv1[:2]), n_points))
+    else:
+        mx, my = _map_points(quads, uv1)
+    step = 32000  # OpenCV's maps stay under 32767 px a side
+    if k <= step and n_points <= step:
+        return cv2.remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return np.vstack([np.hstack([cv2.remap(gray, mx[r : r + step, c : c + step], my[r : r + step, c : c + step],
+                                           cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+                                 for c in range(0, n_points, step)]) for r in range(0, k, step)])
 
 
 _GRIDS: dict[tuple[int, int], NDArray[np.float32]] = {}  # (3, P) points u, v, 1 per (n, per_side)
 
 
-def sample_cells(gray: NDArray[np.uint8], quads: NDArray, n: int, *, per_side: int = 3) -> CellSample:
+def sample_cells(gray: NDArray[np.uint8], quads: NDArray, n: int, *, per_side: int = 3,
+                 native: bool | None = None) -> CellSample:
     """Grey levels of each of the ``n x n`` cells of each quad and of the ring around it.
 
     Parameters
@@ -146,8 +170,11 @@ def sample_cells(gray: NDArray[np.uint8], quads: NDArray, n: int, *, per_side: i
     n : int
         Cells per side including the black border (bits per side + 2 x border cells).
     per_side : int
-        Samples across each cell (``per_side ** 2`` per cell, 0.2 cell apart), read by one
-        ``cv2.remap`` for all quads (bilinear, the image's edge pixels repeated beyond it).
+        Samples across each cell (``per_side ** 2`` per cell, 0.2 cell apart), read as
+        ``cv2.remap`` reads them (bilinear, the image's edge pixels repeated beyond it).
+    native : bool or None
+        Compute the sampling maps with compiled code (``True``: ``visloc.markers._cells``,
+        the same maps) or with numpy (``False``); ``None``: compiled when it was built.
 
     Returns
     -------
@@ -170,8 +197,7 @@ def sample_cells(gray: NDArray[np.uint8], quads: NDArray, n: int, *, per_side: i
         uv = _unit_grid(n, per_side)
         _GRIDS[n, per_side] = np.vstack([uv.T, np.ones(len(uv))]).astype(np.float32)
     uv1 = _GRIDS[n, per_side]  # (3, P): u, v, 1
-    mx, my = _map_points(q, uv1)
-    raw = cv2.remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).reshape(len(q), -1, m)
+    raw = _read_points(gray, q, uv1, native).reshape(len(q), -1, m)
     vals = raw.sum(axis=2, dtype=np.uint32) / m  # whole sums: float64's, in two thirds of the time
     samples = raw[:, : n * n].reshape(len(q), n, n, m)
     return CellSample(vals[:, : n * n].reshape(-1, n, n), vals[:, n * n :], samples)
@@ -201,8 +227,8 @@ def read_cells(gray: NDArray[np.uint8], quads: NDArray, n: int, *, per_side: int
     min_quiet_zone : float
         Least fraction of the ring cells that must be white (:func:`read_bits`).
     native : bool or None
-        Run the compiled read (``True``) or the numpy one (``False``); ``None``: the compiled
-        one when it was built (:data:`NATIVE_CELLS`).
+        Run the compiled sampling and read (``True``) or the numpy ones (``False``); ``None``:
+        the compiled ones when they were built (:data:`NATIVE_CELLS`).
 
     Returns
     -------
@@ -218,7 +244,7 @@ def read_cells(gray: NDArray[np.uint8], quads: NDArray, n: int, *, per_side: int
     RuntimeError
         If ``native=True`` and the compiled module was not built.
     """
-    sample = sample_cells(gray, quads, n, per_side=per_side)
+    sample = sample_cells(gray, quads, n, per_side=per_side, native=native)
     k = len(sample.cells)
     if k == 0 or not use_compiled(native, _cells, "visloc.markers._cells"):
         return sample, read_bits(sample, border_error_rate=border_error_rate, min_contrast=min_contrast,
@@ -245,7 +271,7 @@ def _area_grid(n: int, per_side: int, margin: float) -> NDArray[np.float32]:
 
 
 def cell_white_fractions(gray: NDArray[np.uint8], quads: NDArray, n: int, threshold: NDArray, *,
-                         per_side: int = 8, margin: float = 0.13) -> NDArray[np.float64]:
+                         per_side: int = 8, margin: float = 0.13, native: bool | None = None) -> NDArray[np.float64]:
     """Fraction of each cell's read area brighter than the marker's threshold, as OpenCV
     reads cells (the share of white pixels of each cell of the marker warped square, a
     ``margin`` of the cell left out on every side).
@@ -262,6 +288,8 @@ def cell_white_fractions(gray: NDArray[np.uint8], quads: NDArray, n: int, thresh
     margin : float
         Fraction of the cell left out on each side, in [0, 0.5) (OpenCV's
         ``perspectiveRemoveIgnoredMarginPerCell``, 0.13).
+    native : bool or None
+        As for :func:`sample_cells`.
 
     Returns
     -------
@@ -273,12 +301,9 @@ def cell_white_fractions(gray: NDArray[np.uint8], quads: NDArray, n: int, thresh
     if len(q) == 0:
         return np.zeros((0, n, n))
     uv1 = _area_grid(n, per_side, float(margin))
-    side = n * per_side  # one map row per sample row, markers in chunks: OpenCV maps stay under 32767 px
-    mx, my = (a.reshape(-1, side) for a in _map_points(q, uv1))
-    rows = (32000 // side) * side
-    vals = np.concatenate([cv2.remap(gray, mx[a : a + rows], my[a : a + rows], cv2.INTER_LINEAR,
-                                     borderMode=cv2.BORDER_REPLICATE) for a in range(0, len(mx), rows)])
-    white = vals.reshape(len(q), -1) > np.asarray(threshold, np.float64).reshape(-1, 1)
+    side = n * per_side
+    vals = _read_points(gray, q, uv1, native)
+    white = vals > np.asarray(threshold, np.float64).reshape(-1, 1)
     # the count of each cell's samples, one axis at a time (a third of mean(axis=(2, 4))'s time)
     count = white.view(np.uint8).reshape(len(q), n, per_side, side).sum(axis=2, dtype=np.uint32)
     return count.reshape(len(q), n, n, per_side).sum(axis=3) / (per_side * per_side)

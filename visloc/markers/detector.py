@@ -532,7 +532,7 @@ class MarkerDetector:
         n = self.dictionary.marker_size + 2 * bb
         cell_px = statistics.median(np.sqrt(np.abs(_areas(corners))).tolist()) / n  # np.median's value, cheaper
         per_side = int(np.clip(np.ceil(cell_px / 2), 4, 32))  # a sample per 2 px of cell, 4-32
-        white = cell_white_fractions(gray, corners, n, thr, per_side=per_side, margin=p.cell_margin)
+        white = cell_white_fractions(gray, corners, n, thr, per_side=per_side, margin=p.cell_margin, native=p.native)
         expected = self._cells_seen[ids, (4 - shift) % 4]  # decode: observed = rot90(true, (4 - shift) % 4)
         wrong = np.where(expected == 1, 1.0 - white, white)
         confidence = 1.0 - wrong.reshape(len(wrong), -1).mean(axis=1)
@@ -811,7 +811,7 @@ class MarkerDetector:
             retry = np.flatnonzero(~(reads[0] & reads[8]) & (refined if use_fit else True))
             if not len(retry):
                 continue
-            again = sample_cells(gray, quads[retry], n_cells, per_side=4) if use_fit else _take(cells, retry)
+            again = sample_cells(gray, quads[retry], n_cells, per_side=4, native=p.native) if use_fit else _take(cells, retry)
             read = read_bits(again, border_error_rate=p.border_error_rate, border=bb, min_quiet_zone=p.min_quiet_zone,
                              shading=shading)
             dec = decode(read.bits, self.dictionary, error_correction_rate=p.error_correction_rate)

@@ -172,7 +172,8 @@ def estimate_camera_pose(
     if not known:
         return None
     ids = [int(d.id) for d in known]
-    obj = np.stack([marker_map.corners_of(i) for i in ids])  # (M, 4, 3)
+    all_ids, all_corners = marker_map.stacked
+    obj = all_corners[np.searchsorted(all_ids, ids)]  # (M, 4, 3)
     xy = camera.normalize(np.concatenate([d.corners for d in known])).reshape(-1, 4, 2)  # (M, 4, 2)
     f = np.array([[camera.fx], [camera.fy]])
     fit = None

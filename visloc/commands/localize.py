@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
 from contextlib import ExitStack
 from pathlib import Path
 
@@ -24,6 +25,7 @@ from visloc.commands._common import (
 from visloc.errors import UsageError
 from visloc.io import JsonlWriter, RerunLogger
 from visloc.pose import Camera
+from visloc.types import Pose
 
 LOCALIZE_GRID = {"rows": 10, "cols": 10, "marker_length": 0.10, "spacing": 0.05}
 
@@ -85,14 +87,12 @@ def localize(args: argparse.Namespace) -> int:
     from visloc.estimation.fusion import MapFixFusion
     from visloc.io import CsvWriter
     from visloc.io.mavlink import MavlinkSink
-    from visloc.markers import MarkerTracker
-    from visloc.pose.map_pose import estimate_camera_pose, markers_in_view
+    from visloc.pose.map_pose import estimate_camera_pose
     from visloc.pose.maps import MarkerMap
 
     mmap = MarkerMap.from_file(args.map)
     dictionary_for(args, "localize", mmap)
-    find = finder_for(detector_for(args), args)
-    tracker = find.__self__ if isinstance(getattr(find, "__self__", None), MarkerTracker) else None
+    find = _map_finder(args, mmap)
     camera = Camera.from_file(args.camera)
     truth = None
     if args.truth:
@@ -122,12 +122,7 @@ def localize(args: argparse.Namespace) -> int:
                     out.write(row | {"fix": "unreadable"})
                 continue
             cam = camera_for(camera, frame.image.shape, warned, "localize")
-            if tracker is not None and last_pose is not None:  # the map's markers in the last fix's view too
-                h, w = frame.image.shape[:2]
-                dets = tracker.detect(frame.image, expected=markers_in_view(mmap, cam, last_pose, size=(w, h)))
-            else:
-                dets = find(frame.image)
-            mp = estimate_camera_pose(dets, mmap, cam, start=last_pose)  # from the last fix
+            mp = estimate_camera_pose(find(frame.image, cam, last_pose), mmap, cam, start=last_pose)  # from the last fix
             last_pose = None if mp is None else mp.pose
             force = None
             if imu is not None and R_map_cam is not None and last_t is not None:
@@ -168,6 +163,27 @@ def localize(args: argparse.Namespace) -> int:
         print(f"visloc localize: {n_frames} frames, {fixes} position fixes, {failed} unreadable{used}{err}",
               file=sys.stderr)
     return 1 if failed else 0
+
+def _map_finder(args: argparse.Namespace, mmap) -> Callable[[np.ndarray, Camera, Pose | None], list]:
+    """What finds each frame's markers for ``localize``: ``find(image, camera, last_pose)``,
+    the detector (:func:`finder_for`), or with ``--redetect-every N`` (N > 1) a
+    :class:`visloc.markers.MarkerTracker` also told the map's markers in the last fix's view
+    (:func:`visloc.pose.markers_in_view`): they join at once, and the full search runs only
+    when following fails."""
+    from visloc.markers import MarkerTracker
+    from visloc.pose.map_pose import markers_in_view
+
+    find = finder_for(detector_for(args), args)
+    tracker = find.__self__ if isinstance(getattr(find, "__self__", None), MarkerTracker) else None
+
+    def markers(image: np.ndarray, camera: Camera, last_pose: Pose | None) -> list:
+        if tracker is None or last_pose is None:
+            return find(image)
+        h, w = image.shape[:2]
+        return tracker.detect(image, expected=markers_in_view(mmap, camera, last_pose, size=(w, h)))
+
+    return markers
+
 
 def _send_fix(link, args: argparse.Namespace, fusion, R_map_cam: np.ndarray, t: float) -> None:
     """The filter's estimate after a fix, to the flight stack (``--mavlink``): position (and

@@ -15,6 +15,11 @@ and on any frame on which fewer than ``keep`` of the followed markers whose pred
 inside the image confirm (a jerk that outran the prediction): that frame's markers are then
 exactly :meth:`~visloc.markers.MarkerDetector.detect`'s. A followed marker is known by its id
 (and polarity): an id printed twice in view is followed once between full detections.
+
+With a marker map, the markers the last camera pose puts in view can be handed to
+:meth:`MarkerTracker.detect` (``expected=``, :func:`visloc.pose.markers_in_view`): those not
+followed yet are tried at once, as markers first found in the previous frame, and the periodic
+full detection is no longer needed (``visloc localize`` and the simulation's vision do this).
 """
 
 from __future__ import annotations

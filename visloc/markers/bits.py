@@ -126,7 +126,7 @@ def _unit_grid(n: int, per_side: int) -> NDArray[np.float64]:
 def _map_points(quads: NDArray, uv1: NDArray[np.float32]) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
     """Image x and y (K, P) of the unit-square points ``uv1`` (3, P: u, v, 1) on each quad (K, 4, 2),
     through :func:`square_to_quad` in single precision (``cv2.remap``'s maps), each coordinate
-    ``(h0 u + h1 v) + h2`` over ``(h6 u + h7 v) + h8`` as the compiled sampler computes it."""
+    ``(h0 u + h1 v) + h2`` over ``(h6 u + h7 v) + h8``, as ``_cells.quad_maps`` computes them."""
     H = square_to_quad(quads).astype(np.float32)[:, :, :, None]  # (K, 3, 3, 1)
     hom = H[:, :, 0] * uv1[0] + H[:, :, 1] * uv1[1] + H[:, :, 2]  # (K, 3, P)
     return hom[:, 0] / hom[:, 2], hom[:, 1] / hom[:, 2]

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Callable
 
 import numpy as np
 from tqdm import tqdm
@@ -48,12 +47,12 @@ def detector_for(args: argparse.Namespace) -> MarkerDetector:
     return MarkerDetector(args.dict, **options)
 
 
-def finder_for(detector: MarkerDetector, args: argparse.Namespace) -> Callable[[np.ndarray], list[MarkerDetection]]:
-    """What finds the markers of each frame in turn: ``detector.detect``, or with
-    ``--redetect-every N`` (N > 1) a :class:`visloc.markers.MarkerTracker`'s ``detect`` (the
+def finder_for(detector: MarkerDetector, args: argparse.Namespace) -> MarkerDetector | MarkerTracker:
+    """What finds the markers of each frame in turn (its ``detect(image)``): ``detector``, or
+    with ``--redetect-every N`` (N > 1) a :class:`visloc.markers.MarkerTracker` on it (the
     full search every Nth frame, the markers of the last frames followed between)."""
     every = getattr(args, "redetect_every", 1)
-    return MarkerTracker(detector, redetect_every=every).detect if every > 1 else detector.detect
+    return MarkerTracker(detector, redetect_every=every) if every > 1 else detector
 
 
 def frames_of(source, args: argparse.Namespace):

@@ -7,6 +7,7 @@ import sys
 from collections.abc import Callable
 from contextlib import ExitStack
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -26,6 +27,9 @@ from visloc.errors import UsageError
 from visloc.io import JsonlWriter, RerunLogger
 from visloc.pose import Camera
 from visloc.types import Pose
+
+if TYPE_CHECKING:
+    from visloc.pose.maps import MarkerMap
 
 LOCALIZE_GRID = {"rows": 10, "cols": 10, "marker_length": 0.10, "spacing": 0.05}
 
@@ -164,7 +168,8 @@ def localize(args: argparse.Namespace) -> int:
               file=sys.stderr)
     return 1 if failed else 0
 
-def _map_finder(args: argparse.Namespace, mmap) -> Callable[[np.ndarray, Camera, Pose | None], list]:
+
+def _map_finder(args: argparse.Namespace, mmap: MarkerMap) -> Callable[[np.ndarray, Camera, Pose | None], list]:
     """What finds each frame's markers for ``localize``: ``find(image, camera, last_pose)``,
     the detector (:func:`finder_for`), or with ``--redetect-every N`` (N > 1) a
     :class:`visloc.markers.MarkerTracker` also told the map's markers in the last fix's view
@@ -173,14 +178,13 @@ def _map_finder(args: argparse.Namespace, mmap) -> Callable[[np.ndarray, Camera,
     from visloc.markers import MarkerTracker
     from visloc.pose.map_pose import markers_in_view
 
-    find = finder_for(detector_for(args), args)
-    tracker = find.__self__ if isinstance(getattr(find, "__self__", None), MarkerTracker) else None
+    finder = finder_for(detector_for(args), args)
 
     def markers(image: np.ndarray, camera: Camera, last_pose: Pose | None) -> list:
-        if tracker is None or last_pose is None:
-            return find(image)
+        if not isinstance(finder, MarkerTracker) or last_pose is None:
+            return finder.detect(image)
         h, w = image.shape[:2]
-        return tracker.detect(image, expected=markers_in_view(mmap, camera, last_pose, size=(w, h)))
+        return finder.detect(image, expected=markers_in_view(mmap, camera, last_pose, size=(w, h)))
 
     return markers
 
@@ -245,7 +249,7 @@ def track(args: argparse.Namespace) -> int:
     body = MarkerMap.from_file(args.body)
     reference = MarkerMap.from_file(args.reference)
     dictionary_for(args, "track", body, reference)
-    find = finder_for(detector_for(args), args)
+    find = finder_for(detector_for(args), args).detect
     camera = Camera.from_file(args.camera)
     target = None
     if args.udp:

@@ -42,7 +42,7 @@ def detect(args: argparse.Namespace) -> int:
         Exit status: 0; 1 when some frames could not be read (each named on a warning line).
     """
     detector = detector_for(args)
-    find = finder_for(detector, args)
+    find = finder_for(detector, args).detect
     camera = Camera.from_file(args.camera) if args.camera else None
     if (camera is None) != (args.marker_length is None):
         raise UsageError("poses need both --camera FILE and --marker-length M")

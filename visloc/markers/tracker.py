@@ -132,19 +132,18 @@ class MarkerTracker:
         return dets
 
     def _new_expected(self, expected: Mapping[int, ArrayLike] | None) -> dict[tuple[int, bool], NDArray]:
-        """The expected markers not followed yet, keyed as the followed ones."""
-        if expected is None:
+        """The expected markers not followed yet, keyed as the followed ones (all the corners
+        checked at once)."""
+        if not expected:
             return {}
+        try:
+            q = np.asarray(list(expected.values()), dtype=np.float64)
+        except (TypeError, ValueError):  # ragged or not numbers
+            q = np.zeros(0)
+        if q.shape[1:] != (4, 2) or not np.isfinite(q).all():
+            raise ValueError("expected: each marker's corners must be (4, 2) finite numbers")
         polarity = self.detector.params.inverted is True
-        new: dict[tuple[int, bool], NDArray] = {}
-        for marker_id, corners in expected.items():
-            q = np.asarray(corners, dtype=np.float64)
-            if q.shape != (4, 2) or not np.isfinite(q).all():
-                raise ValueError(f"expected[{marker_id!r}]: corners must be (4, 2) finite numbers, got shape {q.shape}")
-            key = (int(marker_id), polarity)
-            if key not in self._last:
-                new[key] = q
-        return new
+        return {(int(i), polarity): c for i, c in zip(expected, q, strict=True) if (int(i), polarity) not in self._last}
 
     def _follow(self, gray: NDArray[np.uint8], new: dict[tuple[int, bool], NDArray]) -> list[MarkerDetection] | None:
         """The followed markers (and the ``new`` expected ones) confirmed in ``gray``; None if

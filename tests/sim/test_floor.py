@@ -101,3 +101,31 @@ def test_the_warped_view_is_the_ray_traced_one():
     R, C = far.R.T, -far.R.T @ far.t
     C[:2] -= floor.origin
     assert _warped(floor.levels, cam.K, cam.size, R, C, floor.metres_per_texel, 2) is None
+
+
+def test_bottom_camera_one_sample_per_pixel_puts_the_corners_where_they_are():
+    """The sim's camera warps one bilinear sample per pixel of the texture level whose texels
+    are about a pixel (the level is an area average already): noise-free, the detector's
+    corners lie within a tenth of a pixel (RMS) of the true projections, against about 0.045
+    px with 2 x 2 samples per pixel (measured: 0.066 and 0.045 px over 30 poses)."""
+    from visloc.pose import markers_in_view
+    from visloc.pose.rotations import euler_to_matrix
+
+    cams = {s: BottomCamera(GRID, "DICT_4X4_50", noise_sigma=0.0, supersample=s) for s in (1, 2)}
+    assert BottomCamera(GRID, "DICT_4X4_50").supersample == 1
+    det, rng = MarkerDetector("DICT_4X4_50", response="linear"), np.random.default_rng(3)
+    err: dict[int, list] = {1: [], 2: []}
+    for _ in range(6):
+        state = np.zeros(12)
+        state[:3] = [*rng.uniform(-0.05, 0.05, 2), -rng.uniform(0.5, 1.2)]
+        R = euler_to_matrix(rng.uniform(-0.1, 0.1, 3))
+        for s, cam in cams.items():
+            truth = markers_in_view(GRID, Camera(cam.K), cam.pose(state, R), size=cam.size)
+            found = {d.id: d.corners for d in det.detect(cam.capture(state, R))}
+            assert found.keys() == truth.keys()
+            err[s] += [np.linalg.norm(found[i] - truth[i], axis=1) for i in truth]
+    rms = {s: float(np.sqrt(np.mean(np.concatenate(e) ** 2))) for s, e in err.items()}
+    assert rms[1] < 0.1 and rms[2] < 0.06 and rms[1] < 2.0 * rms[2], rms
+    for bad in (0, 9, 1.5, True):
+        with pytest.raises(ValueError, match="supersample"):
+            BottomCamera(GRID, "DICT_4X4_50", supersample=bad)

@@ -423,7 +423,7 @@ def _stopped(s: FloatArray, sp: FloatArray, t: float, p: ARDrone2Params) -> tupl
     if max(abs(s[6]), abs(s[7])) > CRASH_TILT:
         return SimStatus.CRASHED, (f"tipped over at t = {t:.2f} s (roll {math.degrees(s[6]):.0f} deg, "
                                    f"pitch {math.degrees(s[7]):.0f} deg)")
-    if np.linalg.norm(s[:3] - sp[:3]) > FAR:
+    if math.dist(s[:3].tolist(), sp[:3].tolist()) > FAR:
         return SimStatus.DIVERGED, f"drifted {FAR:g} m from the set point at t = {t:.2f} s"
     return None
 

@@ -95,6 +95,12 @@ class BottomCamera:
         Sensor noise, grey levels (drawn by OpenCV, seeded from ``rng``).
     rng : numpy.random.Generator
         Noise source.
+    supersample : int
+        Texture samples per pixel axis (1-8; :meth:`visloc.synth.FloorTexture.render`). 1, the
+        default: one bilinear sample per pixel of the texture level whose texels are about the
+        pixel's size (the level is already an area average of the finer texture), a quarter of
+        the warp of 2. Noise-free, the detector's corners then lie 0.066 px RMS from the true
+        projections, against 0.045 px with 2 (30 views of a 4 x 4 grid).
 
     Attributes
     ----------
@@ -104,13 +110,17 @@ class BottomCamera:
     """
 
     def __init__(self, marker_map: MarkerMap, dictionary: str, *, size: tuple[int, int] = (320, 240),
-                 noise_sigma: float = 2.0, rng: np.random.Generator | None = None) -> None:
+                 noise_sigma: float = 2.0, rng: np.random.Generator | None = None,
+                 supersample: int = 1) -> None:
         self.floor = FloorTexture.from_map(marker_map, dictionary)
         self.marker_map = marker_map
         self.dictionary = dictionary
         self.size = size
         self.K = default_bottom_camera(size)
         self.noise_sigma = check_real(noise_sigma, "noise_sigma", nonneg=True)
+        if isinstance(supersample, bool) or not isinstance(supersample, int) or not 1 <= supersample <= 8:
+            raise ValueError(f"supersample must be an integer in 1-8, got {supersample!r}")
+        self.supersample = supersample
         self.rng = rng if rng is not None else np.random.default_rng()
         pts = np.concatenate([marker_map.corners_of(int(i)) for i in marker_map.ids])
         self.centre = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
@@ -124,7 +134,7 @@ class BottomCamera:
 
     def capture(self, state: FloatArray, R: FloatArray) -> NDArray[np.uint8]:
         """The image seen from ``state`` (raises ``ValueError`` if the view leaves the floor)."""
-        return self.floor.render(self.K, self.size, self.pose(state, R),
+        return self.floor.render(self.K, self.size, self.pose(state, R), supersample=self.supersample,
                                  noise_sigma=self.noise_sigma, rng=self.rng, fast_noise=True)
 
     def body_from_map(self, T_cam_map: Pose) -> tuple[FloatArray, FloatArray]:

@@ -368,12 +368,13 @@ def _check_pose(pose: object) -> tuple[FloatArray, FloatArray]:
 
 
 def _texture_level(levels: tuple[NDArray[np.float32], ...], K: FloatArray, size: tuple[int, int],
-                   R: FloatArray, C: FloatArray, mpt: float) -> tuple[NDArray[np.float32], float]:
+                   R: FloatArray, C: FloatArray, mpt: float, k_inv: FloatArray | None = None
+                   ) -> tuple[NDArray[np.float32], float]:
     """The texture level a view samples (a pixel spans at most 1.5 of its texels at the
     principal point) and its scale ``2^level``; ``ValueError`` when part of the view misses
-    the ground."""
+    the ground. ``k_inv``: ``K``'s inverse, if the caller has it."""
     w, h = size
-    k_inv = np.linalg.inv(K)
+    k_inv = np.linalg.inv(K) if k_inv is None else k_inv
     corners = k_inv @ np.array([[-0.5, w - 0.5, -0.5, w - 0.5], [-0.5, -0.5, h - 0.5, h - 0.5],
                                 [1.0, 1.0, 1.0, 1.0]])
     if np.max((R @ corners)[2]) >= -1e-9:  # ray z is linear in the pixel: corners suffice

@@ -158,10 +158,11 @@ def _warped(levels: tuple[NDArray, ...], K: FloatArray, size: tuple[int, int], R
     the levels' type (uint8 for a :class:`FloorTexture`: rounded at each sample and mean). None
     when the view reaches beyond the texture, whose mirror tiling ``_render`` keeps."""
     w, h = size
-    tex, scale = _texture_level(levels, K, size, R, C, mpt)
+    k_inv = np.linalg.inv(K)
+    tex, scale = _texture_level(levels, K, size, R, C, mpt, k_inv)
     k = -C[2] / (mpt * scale)  # ray length to the ground per unit ray z, in texels
     off = C[:2] / (mpt * scale) + 0.5 / scale - 0.5  # the camera's texel, in the level's coordinates
-    to_tex = np.vstack([k * R[0] + off[0] * R[2], k * R[1] + off[1] * R[2], R[2]]) @ np.linalg.inv(K)
+    to_tex = np.vstack([k * R[0] + off[0] * R[2], k * R[1] + off[1] * R[2], R[2]]) @ k_inv
     sample = np.array([[1.0 / s, 0.0, 0.5 / s - 0.5], [0.0, 1.0 / s, 0.5 / s - 0.5], [0.0, 0.0, 1.0]])
     H = to_tex @ sample  # sample (column, row) -> texel (u, v)
     edge = np.array([[-0.5, w * s - 0.5, w * s - 0.5, -0.5], [-0.5, -0.5, h * s - 0.5, h * s - 0.5], [1.0] * 4])

@@ -129,3 +129,26 @@ def test_bottom_camera_one_sample_per_pixel_puts_the_corners_where_they_are():
     for bad in (0, 9, 1.5, True):
         with pytest.raises(ValueError, match="supersample"):
             BottomCamera(GRID, "DICT_4X4_50", supersample=bad)
+
+
+def test_bottom_camera_noise_is_white_rounded_and_new_each_frame():
+    """Each frame's noise is a window of the camera's noise field at a random offset: rounded
+    Gaussian of ``noise_sigma`` within the frame, different from the last frame's, seeded."""
+    state = np.zeros(12)
+    state[2] = -0.8
+    clean = BottomCamera(GRID, "DICT_4X4_50", noise_sigma=0.0).capture(state, np.eye(3))
+    cam = BottomCamera(GRID, "DICT_4X4_50", noise_sigma=3.0, rng=np.random.default_rng(7))
+    a, b = cam.capture(state, np.eye(3)), cam.capture(state, np.eye(3))
+    again = BottomCamera(GRID, "DICT_4X4_50", noise_sigma=3.0, rng=np.random.default_rng(7)).capture(state, np.eye(3))
+    np.testing.assert_array_equal(a, again)
+    mid = (clean > 20) & (clean < 235)  # away from the clipping
+    n = int(mid.sum())
+    assert n > 5000
+    se = 1.0 / np.sqrt(n)  # bounds at 4.5 standard errors
+    for img in (a, b):
+        d = img.astype(float)[mid] - clean[mid]
+        assert np.all(d == np.round(d)) and abs(d.mean()) < 4.5 * 3.0 * se
+        assert abs(d.std() - np.sqrt(9.0 + 1.0 / 12.0)) < 4.5 * 3.0 * se / np.sqrt(2.0)
+        assert abs(np.corrcoef(d[:-1], d[1:])[0, 1]) < 4.5 * se  # white: neighbours uncorrelated
+    da, db = a.astype(float)[mid] - clean[mid], b.astype(float)[mid] - clean[mid]
+    assert abs(np.corrcoef(da, db)[0, 1]) < 4.5 * se  # the next frame's noise is not this frame's

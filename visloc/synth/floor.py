@@ -145,6 +145,8 @@ class FloorTexture:
             img = _render(self.levels, K, (w, h), R_map_cam, centre, self.metres_per_texel, s)
         noise = check_number(noise_sigma, "noise_sigma", low=0.0)
         blur = check_number(blur_sigma, "blur_sigma", low=0.0)
+        if noise == 0.0 and blur == 0.0 and img.dtype == np.uint8:  # nothing to degrade: degrade's own result
+            return img
         return degrade(img, rng if rng is not None else np.random.default_rng(), blur_sigma=blur,
                        noise_sigma=noise, fast_noise=bool(fast_noise))[0]
 

@@ -191,8 +191,8 @@ def degrade(
     fast_noise : bool
         Draw the noise with OpenCV's ``cv2.randn`` (its per-thread generator seeded from
         ``rng``) in a sixth of ``rng.normal``'s time, and do the arithmetic in float32 (the
-        same rounding to uint8): the closed-loop simulation's camera. False keeps float64
-        and ``rng.normal``, with which every stored render was made.
+        same rounding to uint8). False keeps float64 and ``rng.normal``, with which every
+        stored render was made.
 
     Returns
     -------

@@ -532,7 +532,7 @@ class MarkerDetector:
         bb = p.border_bits
         n = self.dictionary.marker_size + 2 * bb
         cell_px = statistics.median(np.sqrt(np.abs(_areas(corners))).tolist()) / n  # np.median's value, cheaper
-        per_side = int(np.clip(np.ceil(cell_px / 2), 4, 32))  # a sample per 2 px of cell, 4-32
+        per_side = min(max(math.ceil(cell_px / 2), 4), 32)  # a sample per 2 px of cell, 4-32
         white = cell_white_fractions(gray, corners, n, thr, per_side=per_side, margin=p.cell_margin, native=p.native)
         expected = self._cells_seen[ids, (4 - shift) % 4]  # decode: observed = rot90(true, (4 - shift) % 4)
         wrong = np.where(expected == 1, 1.0 - white, white)
@@ -754,11 +754,10 @@ class MarkerDetector:
         ids, shift, hamming = reads[5:8]
         order = (_FOUR[None, :] + shift[:, None]) % 4  # all at once
         rolled = corners[np.arange(len(corners))[:, None], order]
-        rows = zip(accept.tolist(), ids.tolist(), hamming.tolist(), reads[2].tolist(), shift.tolist(),
-                   reads[3].tolist(), refined.tolist(), confidence.tolist(), strict=True)
-        made = [MarkerDetection(int(mid), rolled[i], int(ham), float(mar), int(rot), float(con), bool(ref),
-                                float(conf), inverted) if ok else None
-                for i, (ok, mid, ham, mar, rot, con, ref, conf) in enumerate(rows)]
+        rows = zip(accept.tolist(), ids.tolist(), list(rolled), hamming.tolist(), reads[2].tolist(), shift.tolist(),
+                   reads[3].tolist(), refined.tolist(), confidence.tolist(), strict=True)  # Python ints, floats, bools
+        made = [MarkerDetection(mid, c, ham, mar, rot, con, ref, conf, inverted) if ok else None
+                for ok, mid, c, ham, mar, rot, con, ref, conf in rows]
         return cells, reads, made, np.abs(_areas(rolled)).tolist()
 
     def _read(self, gray: NDArray[np.uint8], quads: NDArray, inverted: bool, *, retry_fit: bool = True) -> tuple:

@@ -13,6 +13,7 @@ disagree with the rest are dropped and the fit repeated.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from statistics import median
 
@@ -70,13 +71,16 @@ class MapPose:
         cov = self.pose.covariance
         if cov is None:
             return None
-        t, angles = self.pose.t, matrix_to_euler(self.pose.R)
-        h = 1e-6  # the angles' columns: central differences, the seven rotations at once
-        R = euler_to_matrix(angles + np.concatenate([np.zeros((1, 3)), h * np.eye(3), -h * np.eye(3)]))
-        c = -(np.swapaxes(R, 1, 2) @ t)  # (7, 3) camera centres
+        R = self.pose.R
+        u = R.T @ self.pose.t  # -c
+        # d R / d angle_i = R [a_i]x with a_phi = e1, a_theta = Rx(phi)^T e2, a_psi = R^T e3, so
+        # d c / d angle_i = a_i x u (phi from R's last row: Rx(phi)^T e2 = (0, cos phi, -sin phi))
+        r20, r21, r22 = R[2].tolist()
+        norm = math.hypot(r21, r22)
+        axes = np.array([[1.0, 0.0, 0.0], [0.0, r22 / norm, -r21 / norm], [r20, r21, r22]])
         J = np.empty((3, 6))
-        J[:, :3] = -R[0].T
-        J[:, 3:] = ((c[1:4] - c[4:7]) / (2 * h)).T
+        J[:, :3] = -R.T
+        J[:, 3:] = np.cross(axes, u).T
         out = J @ cov @ J.T
         return 0.5 * (out + out.T)
 

@@ -164,6 +164,28 @@ def test_position_covariance_matches_monte_carlo():
     assert np.all(emp / pred > 0.7) and np.all(emp / pred < 1.4), (emp, pred)
 
 
+
+def test_position_covariance_is_the_jacobian_of_the_camera_centre_even_at_pitch_90():
+    """``c = -R^T t`` through the pose's six parameters: the analytic columns against central
+    differences, and at the Z-Y-X singularity (pitch exactly 90 deg, roll then taken as 0, as
+    ``matrix_to_euler`` takes it) a finite answer."""
+    from visloc.pose.map_pose import MapPose
+    from visloc.pose.rotations import euler_to_matrix
+
+    def centre(p):
+        return -euler_to_matrix(p[3:]).T @ p[:3]
+
+    rng = np.random.default_rng(3)
+    cov = np.diag([1e-6, 2e-6, 3e-6, 1e-4, 2e-4, 3e-4])
+    c, s = np.cos(0.5), np.sin(0.5)
+    pitch_90 = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ np.array([[0.0, 0, 1], [0, 1, 0], [-1, 0, 0]])
+    for angles, R in (([0.3, -0.4, 1.2], None), ([2.9, 0.2, -0.7], None), ([0.0, np.pi / 2, 0.5], pitch_90)):
+        p = np.r_[rng.normal(0.0, 1.0, 3), angles]
+        R = euler_to_matrix(p[3:]) if R is None else R
+        J = np.array([(centre(p + h) - centre(p - h)) / 2e-6 for h in 1e-6 * np.eye(6)]).T
+        got = MapPose(Pose(R, p[:3], 0.1, cov), [], [], [], {}).position_covariance
+        np.testing.assert_allclose(got, J @ cov @ J.T, rtol=1e-6, atol=1e-15)
+
 @pytest.mark.parametrize("kw", [{"max_residual": float("nan")}, {"max_residual": 0.0}, {"pixel_sigma": -1.0},
                                 {"max_iter": 2.5}, {"n_starts": 0}, {"max_iter": True}])
 def test_options_it_cannot_use_are_refused_not_half_used(kw):

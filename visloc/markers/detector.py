@@ -383,7 +383,6 @@ class MarkerDetector:
         lut = response_lut(self.params.response)  # a clear error now rather than at the first frame
         # the inverted image's grey level v holds the light 255 - lut[255 - v] of the original
         self._luts = {False: lut, True: 255.0 - lut[::-1]}
-        self._luts[True].setflags(write=False)  # read-only: response_lut checks it once
         bb = self.params.border_bits
         if isinstance(bb, bool) or not isinstance(bb, (int, np.integer)) or not 1 <= bb <= 3:
             raise ValueError(f"border_bits must be 1, 2 or 3, got {bb!r}")

@@ -16,7 +16,6 @@ pure power law ``255 (v / 255) ** g``.
 
 from __future__ import annotations
 
-import weakref
 from functools import lru_cache
 
 import numpy as np
@@ -58,10 +57,6 @@ def _lut(response: str | float) -> NDArray[np.float64]:
     return lut
 
 
-_checked: weakref.WeakValueDictionary[int, NDArray] = weakref.WeakValueDictionary()
-"""Read-only tables :func:`response_lut` has checked, by ``id`` (gone with the table)."""
-
-
 def response_lut(response: str | float | NDArray) -> NDArray[np.float64]:
     """Linear intensity (0-255 scale) of each 8-bit grey level.
 
@@ -86,13 +81,9 @@ def response_lut(response: str | float | NDArray) -> NDArray[np.float64]:
         256 strictly increasing values.
     """
     if isinstance(response, np.ndarray):
-        if _checked.get(id(response)) is response:  # a read-only table already checked (a detector's)
-            return response
         lut = np.asarray(response, np.float64)
         if lut.shape != (256,) or not np.all(np.diff(lut) > 0):
             raise ValueError(f"response: a table must be 256 increasing values, got shape {lut.shape}")
-        if lut is response and not lut.flags.writeable and lut.base is None:  # cannot change: remember it
-            _checked[id(lut)] = lut
         return lut
     if isinstance(response, str):
         if response not in RESPONSES:

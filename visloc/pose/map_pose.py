@@ -74,10 +74,12 @@ class MapPose:
         R = self.pose.R
         u = R.T @ self.pose.t  # -c
         # d R / d angle_i = R [a_i]x with a_phi = e1, a_theta = Rx(phi)^T e2, a_psi = R^T e3, so
-        # d c / d angle_i = a_i x u (phi from R's last row: Rx(phi)^T e2 = (0, cos phi, -sin phi))
+        # d c / d angle_i = a_i x u (phi from R's last row: Rx(phi)^T e2 = (0, cos phi, -sin phi);
+        # at pitch +-90 deg phi is 0, as matrix_to_euler gives it)
         r20, r21, r22 = R[2].tolist()
         norm = math.hypot(r21, r22)
-        axes = np.array([[1.0, 0.0, 0.0], [0.0, r22 / norm, -r21 / norm], [r20, r21, r22]])
+        cos_phi, sin_phi = (r22 / norm, r21 / norm) if norm > 0.0 else (1.0, 0.0)
+        axes = np.array([[1.0, 0.0, 0.0], [0.0, cos_phi, -sin_phi], [r20, r21, r22]])
         J = np.empty((3, 6))
         J[:, :3] = -R.T
         J[:, 3:] = np.cross(axes, u).T

@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 from visloc.control._checks import check_real
 from visloc.estimation.height import ultrasound_reading
 from visloc.pose.maps import MarkerMap
+from visloc.synth._checks import check_int
 from visloc.synth.flight import default_bottom_camera
 from visloc.synth.floor import FloorTexture
 from visloc.types import FloatArray, Pose
@@ -124,9 +125,7 @@ class BottomCamera:
         self.size = size
         self.K = default_bottom_camera(size)
         self.noise_sigma = check_real(noise_sigma, "noise_sigma", nonneg=True)
-        if isinstance(supersample, bool) or not isinstance(supersample, int) or not 1 <= supersample <= 8:
-            raise ValueError(f"supersample must be an integer in 1-8, got {supersample!r}")
-        self.supersample = supersample
+        self.supersample = check_int(supersample, "supersample", low=1, high=8)
         self.rng = rng if rng is not None else np.random.default_rng()
         self._grain: NDArray[np.int16] | None = None  # the noise field, drawn at the first frame
         pts = np.concatenate([marker_map.corners_of(int(i)) for i in marker_map.ids])

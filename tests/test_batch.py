@@ -177,3 +177,49 @@ def test_a_job_file_runs_like_the_command_line(recordings, cluster, tmp_path, ca
     assert "recordings must be a list" in capsys.readouterr().err
     assert main(["batch", "detect", videos[0]]) == 2  # no --outdir anywhere
     assert "batch needs --outdir" in capsys.readouterr().err
+
+
+def test_outputs_of_other_options_are_never_skipped(recordings, cluster, tmp_path):
+    # a batch of one recording under new options, then all of them under those options: the
+    # others' outputs, newer than their recordings, were written under the old options
+    _, videos, serial = recordings
+    out = tmp_path / "out"
+
+    def run(options: str, recs: list[str]) -> dict[str, str]:
+        assert main(["batch", "detect", *recs, "--outdir", str(out), "--scheduler", cluster, "--options", options,
+                     "--quiet"]) == 0
+        return {k: r["status"] for k, r in _summary(out).items()}
+
+    def found() -> dict[str, bool]:  # whether the output holds markers (the 4x4 options' do, the 5x5's none)
+        return {p.stem: '"id"' in p.read_text() for p in sorted(out.glob("v*.jsonl"))}
+
+    four, five = "--dict DICT_4X4_50", "--dict DICT_5X5_50"
+    assert run(four, videos) == {"v1": "done", "v2": "done", "v3": "done"}
+    assert found() == {"v1": True, "v2": True, "v3": True} and (out / "v1.jsonl").read_bytes() == serial["v1"]
+    assert run(five, videos[:1]) == {"v1": "done"}
+    assert run(five, videos) == {"v1": "skipped", "v2": "done", "v3": "done"}
+    assert found() == {"v1": False, "v2": False, "v3": False}  # every output now the new options'
+    assert run(four, videos[1:]) == {"v2": "done", "v3": "done"}
+    assert run(four, videos) == {"v1": "done", "v2": "skipped", "v3": "skipped"}
+    assert found() == {"v1": True, "v2": True, "v3": True} and (out / "v2.jsonl").read_bytes() == serial["v2"]
+    os.utime(videos[0])  # v1's recording changed: a batch of it alone, then of all, runs it alone
+    assert run(four, videos[:1]) == {"v1": "done"}
+    assert run(four, videos) == {"v1": "skipped", "v2": "skipped", "v3": "skipped"}
+
+
+def test_output_names_depend_on_the_path_alone(tmp_path):
+    from visloc.batch import output_name
+
+    (tmp_path / "flight.mp4").write_text("video\n")
+    (tmp_path / "run.2024-05-01").mkdir()
+    (tmp_path / "Shots.PNG").write_text("image\n")
+    for folder in (tmp_path, tmp_path / "missing"):  # the same name whether the recording is there or not
+        assert output_name(folder / "flight.mp4", "detect") == "flight.jsonl"
+        assert output_name(str(folder / "flight.mp4"), "flow") == "flight.csv"
+        assert output_name(folder / "Shots.PNG", "detect") == "Shots.jsonl"
+        assert output_name(folder / "lab.bag", "track") == "lab.jsonl"
+        assert output_name(folder / "lab.mcap", "localize") == "lab.csv"
+        assert output_name(folder / "run.2024-05-01", "detect") == "run.2024-05-01.jsonl"  # a folder's whole name
+        assert output_name(f"{folder / 'frames'}/", "detect") == "frames.jsonl"
+    with pytest.raises(KeyError):
+        output_name("flight.mp4", "render")

@@ -6,8 +6,9 @@ Each task runs the command as ``visloc COMMAND RECORDING OPTIONS --out TMP --qui
 the worker's own process, and renames ``TMP`` to its final name only when the command finished
 (exit status 0, or 1: some frames unreadable, each recorded in the output): an interrupted or
 failed task leaves no partial file, and a task re-run after a worker died simply writes again.
-A manifest (``batch.json``) records the command and its options; a later batch with the same
-ones skips each recording whose output exists and is newer than the recording.
+A manifest (``batch.json``) records the command, its options and the outputs finished under
+them; a later batch with the same command and options skips each recording whose output is
+listed there, exists and is newer than the recording (:func:`run_batch` says when it is written).
 """
 
 from __future__ import annotations
@@ -30,6 +31,9 @@ __all__ = ["BATCH_COMMANDS", "RecordingResult", "output_name", "plan", "run_batc
 
 #: The commands a batch runs, and the extension of their ``--out`` file.
 BATCH_COMMANDS = {"detect": ".jsonl", "localize": ".csv", "flow": ".csv", "track": ".jsonl"}
+
+#: Suffixes of the recordings read as ROS 1 bags and MCAP files (:func:`visloc.io.bags.is_recording`).
+RECORDING_SUFFIXES = frozenset({".bag", ".mcap"})
 
 MANIFEST = "batch.json"
 SUMMARY = "summary.csv"
@@ -70,10 +74,32 @@ class RecordingResult:
 
 def output_name(recording: str | os.PathLike[str], command: str) -> str:
     """The output file's name for a recording: its file or folder name with the command's
-    extension (``flight.mp4`` -> ``flight.jsonl`` for ``detect``)."""
+    extension (``flight.mp4`` -> ``flight.jsonl`` for ``detect``).
+
+    The name depends on the path alone, never on what is on disk (a recording missing in one
+    run and there in the next keeps its output).
+
+    Parameters
+    ----------
+    recording : str or os.PathLike
+        The input. A video, image, ``.bag`` or ``.mcap`` suffix (any case;
+        :data:`visloc.io.VIDEO_EXTENSIONS`, :data:`visloc.io.IMAGE_EXTENSIONS`) is dropped;
+        any other name is kept whole, e.g. a folder's (``run.2024-05-01`` ->
+        ``run.2024-05-01.jsonl``) or a file's with another suffix (``flight.mpg`` ->
+        ``flight.mpg.jsonl``).
+    command : str
+        A key of :data:`BATCH_COMMANDS` (another raises ``KeyError``).
+
+    Returns
+    -------
+    str
+        The bare file name (no folder), e.g. ``"flight.jsonl"``.
+    """
+    from visloc.io.sources import IMAGE_EXTENSIONS, VIDEO_EXTENSIONS
+
     p = Path(recording)
-    stem = p.stem if p.is_file() else p.name
-    return f"{stem}{BATCH_COMMANDS[command]}"
+    known = p.suffix.lower() in VIDEO_EXTENSIONS | IMAGE_EXTENSIONS | RECORDING_SUFFIXES
+    return f"{p.stem if known else p.name}{BATCH_COMMANDS[command]}"
 
 
 def _count_rows(path: Path, command: str) -> int:
@@ -150,7 +176,31 @@ def plan(command: str, recordings: Sequence[str], options: Sequence[str], outdir
     """Which recordings need a task: ``(to run [(recording, output)], skipped results)``.
 
     A recording is skipped when the manifest in ``outdir`` holds the same command and options
-    and its output exists and is newer than the recording (``force``: never).
+    and lists its output as finished under them, and that output exists and is newer than the
+    recording (``force``: never).
+
+    Parameters
+    ----------
+    command : str
+        A key of :data:`BATCH_COMMANDS`.
+    recordings : sequence of str
+        The inputs (videos, folders, bags, ...); each one's output is ``outdir /``
+        :func:`output_name`.
+    options : sequence of str
+        The command's options, compared with the manifest's (as a list, order included).
+    outdir : str or os.PathLike
+        The output folder, holding the manifest (``batch.json``) of an earlier batch if any;
+        nothing is written.
+    force : bool
+        Skip nothing: every recording gets a task.
+
+    Returns
+    -------
+    todo : list of (str, str)
+        ``(recording, output path)`` of each recording to run, in the order given.
+    skipped : list of RecordingResult
+        One ``"skipped"`` result per up-to-date output (exit 0, ``rows`` counted from the
+        output as for a finished task, 0 s).
 
     Raises
     ------
@@ -171,16 +221,11 @@ def plan(command: str, recordings: Sequence[str], options: Sequence[str], outdir
         names[name] = r
         if Path(r).resolve() == out.resolve():
             raise UsageError(f"batch: the output folder {outdir} is a recording")
-    manifest = out / MANIFEST
-    same = False
-    if manifest.is_file() and not force:
-        with contextlib.suppress(ValueError, OSError):
-            old = json.loads(manifest.read_text())
-            same = old.get("command") == command and old.get("options") == list(options)
+    finished = set() if force else _finished(out, command, list(options))
     todo, skipped = [], []
     for name, r in names.items():
         target = out / name
-        if same and target.is_file() and target.stat().st_mtime >= _mtime(r):
+        if name in finished and target.is_file() and target.stat().st_mtime >= _mtime(r):
             skipped.append(RecordingResult(r, str(target), "skipped", 0, _count_rows(target, command), 0.0, ""))
         else:
             todo.append((r, str(target)))
@@ -258,6 +303,22 @@ def _write_atomic(path: Path, text: str) -> None:
     os.replace(part, path)
 
 
+def _finished(outdir: Path, command: str, options: list[str]) -> set[str]:
+    """The outputs the manifest in ``outdir`` lists as finished under ``command`` and
+    ``options`` (none when it records others, or is missing or unreadable)."""
+    with contextlib.suppress(ValueError, OSError, TypeError, AttributeError):
+        old = json.loads((outdir / MANIFEST).read_text())
+        if old.get("command") == command and old.get("options") == options:
+            return {n for n in old.get("outputs", []) if isinstance(n, str)}
+    return set()
+
+
+def _write_manifest(outdir: Path, command: str, options: list[str], finished: set[str]) -> None:
+    """``batch.json``: the command, its options and the outputs finished under them (names)."""
+    text = json.dumps({"command": command, "options": options, "outputs": sorted(finished)}, indent=1)
+    _write_atomic(outdir / MANIFEST, text + "\n")
+
+
 def write_summary(outdir: str | os.PathLike[str], results: Sequence[RecordingResult]) -> Path:
     """``summary.csv`` in ``outdir``: one row per recording (written atomically), and the same
     table as ``summary.parquet`` where pyarrow is installed."""
@@ -298,6 +359,15 @@ def run_batch(command: str, recordings: Sequence[str], options: str | Sequence[s
               progress: Callable[[RecordingResult], None] | None = None,
               dashboard: Callable[[str], None] | None = None) -> list[RecordingResult]:
     """Run ``command`` over ``recordings`` on Dask; outputs and ``summary.csv`` in ``outdir``.
+
+    An output is skipped only when it was written under this command and these options: the
+    manifest (``batch.json``) lists each output finished under the options it records. Before
+    any task runs it is rewritten with this run's command and options and only the outputs
+    already finished under them (so an output about to be written again, or left by other
+    options, is listed by none); each output is added once its task has finished (``"done"`` or ``"partial"``). A run
+    stopped at any point (Ctrl-C, a crash) therefore lists only outputs written under its own
+    options, and the next run with them runs everything else again, the outputs of other
+    options included; one with other options runs everything.
 
     Parameters
     ----------
@@ -340,7 +410,9 @@ def run_batch(command: str, recordings: Sequence[str], options: str | Sequence[s
     for r in results:
         if progress is not None:
             progress(r)
-    _write_atomic(out / MANIFEST, json.dumps({"command": command, "options": opts}, indent=1) + "\n")
+    # the outputs this run writes again leave the list; those of recordings outside it stay
+    finished = (_finished(out, command, opts) - {Path(t).name for _, t in todo}) | {Path(r.output).name for r in results}
+    _write_manifest(out, command, opts, finished)
     if todo:
         dd = load_dask()
         with contextlib.ExitStack() as stack:
@@ -387,6 +459,9 @@ def run_batch(command: str, recordings: Sequence[str], options: str | Sequence[s
                     parts = pending[i]
                     res = parts[0] if len(parts) == 1 else _merge(rec, target, parts, command)
                     results.append(res)
+                    if res.status in ("done", "partial"):
+                        finished.add(Path(target).name)
+                        _write_manifest(out, command, opts, finished)
                     if progress is not None:
                         progress(res)
             except BaseException:

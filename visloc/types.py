@@ -198,11 +198,35 @@ class Pose:
         return Pose(self.R.T, -self.R.T @ self.t, self.reprojection_rms)
 
     def compose(self, other: Pose) -> Pose:
-        """``self ∘ other``: if self is T_a_b and other is T_b_c, returns T_a_c."""
+        """``self ∘ other``: if self is T_a_b and other is T_b_c, returns T_a_c.
+
+        Parameters
+        ----------
+        other : Pose
+            ``T_b_c``, mapping c-frame points into frame b (``self`` maps b into a).
+
+        Returns
+        -------
+        Pose
+            ``T_a_c``: ``R = self.R @ other.R``, ``t = self.R @ other.t + self.t`` (m); the
+            fit figures (``reprojection_rms``, ``covariance``, ``alternative``) are not
+            carried over.
+        """
         return Pose(self.R @ other.R, self.R @ other.t + self.t)
 
     def apply(self, points: FloatArray) -> FloatArray:
-        """Map (N, 3) object points into the camera frame."""
+        """Map (N, 3) object points into the camera frame.
+
+        Parameters
+        ----------
+        points : array_like (N, 3) or (3,)
+            Points in the object frame (marker, map, body), m.
+
+        Returns
+        -------
+        ndarray (N, 3) or (3,) float64
+            ``R @ p + t`` for each point, m, camera frame (the shape of ``points``).
+        """
         return np.asarray(points, float) @ self.R.T + self.t
 
     def to_dict(self) -> dict:
@@ -280,7 +304,24 @@ class GlobalMotion:
 
     def displacement_at(self, point: FloatArray, image_center: FloatArray) -> FloatArray:
         """Content displacement (2,) at ``point`` (px) under this motion, ``image_center``
-        being the point its translation refers to."""
+        being the point its translation refers to.
+
+        The content at ``p`` moves by ``(scale * R(rotation) - I) @ (p - image_center) +
+        translation``; ``center_of_rotation`` is not used.
+
+        Parameters
+        ----------
+        point : array_like (2,)
+            Image point ``(x, y)``, px, pixel centres at integers.
+        image_center : array_like (2,)
+            The point ``translation`` refers to, px: ``((W-1)/2, (H-1)/2)`` of the frames.
+
+        Returns
+        -------
+        ndarray (2,) float64
+            Displacement ``(dx, dy)`` of the content at ``point`` from the first frame to the
+            second, px.
+        """
         x, y = float(point[0]) - float(image_center[0]), float(point[1]) - float(image_center[1])
         c, s = math.cos(self.rotation) * self.scale, math.sin(self.rotation) * self.scale
         tx, ty = float(self.translation[0]), float(self.translation[1])

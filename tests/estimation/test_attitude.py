@@ -208,3 +208,23 @@ def test_accel_tilt_type_error_names_accel():
         accel_tilt("abc")
     with pytest.raises(TypeError, match="accel"):
         accel_tilt([object(), 1.0, 2.0])
+
+
+def test_complementary_reset_checks_the_bias_before_changing_anything():
+    f = ComplementaryFilter(0.1, initial=(0.1, 0.2), bias=[0.01, 0.02, 0.03])
+    for bad, exc in (([0.0, 0.0], ValueError), ([0.0, np.nan, 0.0], ValueError), ("abc", TypeError)):
+        with pytest.raises(exc, match="bias"):
+            f.reset(0.5, -0.25, bias=bad)
+        assert (f.roll, f.pitch) == (0.1, 0.2)
+        assert np.array_equal(f.bias, [0.01, 0.02, 0.03])
+
+
+def test_complementary_reset_starts_the_fast_start_again():
+    acc = static_accel(0.0, 0.0)
+    f = ComplementaryFilter(0.01, initial=(0.0, 0.0), settle_seconds=1.0, settle_hz=1.0)
+    f.run(np.zeros((300, 3)), np.tile(acc, (300, 1)), 0.01)  # 3 s: past the fast start
+    assert f.elapsed == pytest.approx(3.0)
+    f.reset(0.2, 0.0)
+    assert f.elapsed == 0.0
+    f.update([0.0, 0.0, 0.0], acc, 0.01)  # at 1 Hz, not 0.01 Hz
+    assert f.roll == pytest.approx(0.2 * math.exp(-2 * math.pi * 1.0 * 0.01))

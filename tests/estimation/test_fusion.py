@@ -34,3 +34,10 @@ def test_a_fix_counts_at_least_the_floor_and_the_gate_rejects_a_wild_one():
     fusion.predict(0.2)
     assert not fusion.fix([3.0, 2.0, 0.5])  # 2 m away: the gate
     assert (fusion.fixes, fusion.rejected) == (2, 1)
+
+
+def test_position_std_is_the_prior_s_before_the_first_fix():
+    fusion = MapFixFusion()
+    np.testing.assert_array_equal(fusion.position_std, np.full(3, 1.0e3))
+    fusion = MapFixFusion(initial_position=np.zeros(3), initial_std=(0.1, 1.0))
+    np.testing.assert_allclose(fusion.position_std, 0.1)

@@ -354,3 +354,24 @@ def test_measurement_checks():
         kf.update_acceleration((0.0, 0.0), std=1.0)
     with pytest.raises(ValueError, match="no history"):
         PositionVelocityKF(2, keep_history=False).rts_smooth()
+
+
+@pytest.mark.parametrize("kind", ["position", "velocity", "acceleration"])
+def test_a_bad_measurement_leaves_the_clock_alone(kind):
+    kf = PositionVelocityKF(2, model="ca", initial_position=(0.0, 0.0))
+    kf.predict(1.0)
+    update = getattr(kf, f"update_{kind}")
+    x, P = kf.x, kf.P
+    for args, kwargs, match in (
+        (((0.0, 0.0, 0.0),), {"std": 0.01}, "z must have shape"),
+        (((0.0, 0.0),), {"R": np.eye(3)}, "R must have shape"),
+        (((0.0, 0.0),), {"std": -0.01}, "std must be > 0"),
+        (((0.0, 0.0),), {}, "exactly one of R and std"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            update(*args, t=2.0, **kwargs)
+        assert kf.t == 1.0
+        np.testing.assert_array_equal(kf.x, x)
+        np.testing.assert_array_equal(kf.P, P)
+    assert len(kf.history) == 1
+    assert update((0.0, 0.0), std=0.01, t=2.0) and kf.t == 2.0

@@ -103,3 +103,15 @@ def test_ego_motion_integrates_a_track():
 def test_egomotion_refuses_a_rate_or_height_it_cannot_use(kw):
     with pytest.raises(ValueError, match="must be a finite number > 0"):
         EgoMotion(CAM, **kw)
+
+
+def test_tracking_works_with_a_camera_without_size():
+    # the tracked path (direct=True) takes the image size from the frames, as the block sums do
+    cam = Camera(np.array([[160.0, 0, 79.5], [0, 160.0, 59.5], [0, 0, 1]]))
+    ego = EgoMotion(cam, height=1.0, fps=60.0, options={"direct": True})
+    frames = [moved(-1.6 * k, 0.0, size=(160, 120))[1] for k in range(4)]  # 0.01 m per frame along x
+    assert ego.update(frames[0]) is None
+    out = [ego.update(f) for f in frames[1:]]
+    assert any(gv.motion.method.endswith("+tracked") for gv in out)
+    for gv in out:
+        assert gv.quality > 0.3 and np.allclose(gv.v, (0.6, 0.0), atol=0.03)

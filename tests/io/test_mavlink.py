@@ -56,6 +56,19 @@ def test_nobody_listening_loses_nothing_on_our_side():
     assert link.sent["VISION_POSITION_ESTIMATE"] == 50
 
 
+def test_heartbeat_checks_the_time_first_and_restarts_with_the_clock():
+    with MavlinkSink(f"udpout:127.0.0.1:{_free_port()}") as link:
+        for bad in (math.nan, -1.0, math.inf):
+            with pytest.raises(ValueError, match="time_s"):
+                link.send_vision_position(bad, (0.0, 0.0, -1.0), (0.0, 0.0, 0.0))
+        assert link.sent == {}  # no beat went out for a time that was refused
+        beats = []
+        for t in (0.0, 0.5, 1.0, 1.5, 2.2, 0.1, 0.5, 1.05, 1.2):  # a second recording starts at 0.1 s
+            link.send_vision_position(t, (0.0, 0.0, -1.0), (0.0, 0.0, 0.0))
+            beats.append(link.sent["HEARTBEAT"])
+    assert beats == [1, 1, 2, 2, 3, 4, 4, 4, 5]
+
+
 def test_quaternions_are_scipys_in_mavlinks_order():
     from scipy.spatial.transform import Rotation
 

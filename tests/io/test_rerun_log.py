@@ -143,3 +143,18 @@ def test_bad_arguments(tmp_path: Path) -> None:
             log.log_frame(0, 0.0, image, det, camera=object())
     with pytest.raises(ValueError, match="closed"):
         log.log_frame(1, 0.1, image, det)
+
+
+def test_flow_and_localize_frames_are_checked_as_log_frame_checks_them(tmp_path: Path) -> None:
+    with RerunLogger(tmp_path / "z.rrd") as log:
+        with pytest.raises(ValueError, match="time"):
+            log.log_localize(0, float("nan"), None, (0.0, 0.0, 1.0))
+        with pytest.raises(ValueError, match="time"):
+            log.log_flow(0, float("inf"), None, None, None)
+        with pytest.raises(TypeError, match="index"):
+            log.log_localize(0.5, 0.0, None, (0.0, 0.0, 1.0))
+        log.log_localize(0, 0.0, None, (0.0, 0.0, 1.0))
+    with pytest.raises(ValueError, match="closed"):
+        log.log_localize(1, 0.1, None, (0.0, 0.0, 1.0))
+    with pytest.raises(ValueError, match="closed"):
+        log.log_flow(1, 0.1, None, None, None)

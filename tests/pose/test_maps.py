@@ -244,3 +244,23 @@ def test_markers_in_view_through_a_lens_and_bad_arguments():
         markers_in_view(g, Camera(K), pose)
     with pytest.raises(ValueError, match="margin"):
         markers_in_view(g, lens, pose, margin=-1.0)
+
+
+def test_a_map_keeps_its_own_read_only_corners_and_whole_ids(tmp_path):
+    square = np.array([[0, 0, 0], [1, 0, 0], [1, -1, 0], [0, -1, 0.0]])
+    m = MarkerMap({3: square, 4.0: square + [2, 0, 0]})
+    square[0, 0] = 9.0  # the caller's array changes; the map's does not
+    assert m.corners_of(3)[0, 0] == 0.0 and list(m.ids) == [3, 4]
+    with pytest.raises(ValueError, match="read-only"):
+        m.corners_of(3)[0, 0] = 1.0
+    with pytest.raises(ValueError, match="whole number"):
+        MarkerMap({1.5: square})
+    with pytest.raises(TypeError, match="whole number"):
+        MarkerMap.from_list([("a", square)])
+    (tmp_path / "frac.yml").write_text("%YAML:1.0\nmarkers:\n   - { id: 1.5, corners: [ 0, 0, 0, 1, 0, 0, 1, -1, 0, "
+                                       "0, -1, 0 ] }\n")
+    with pytest.raises(ValueError, match="entry 0.*whole number"):
+        MarkerMap.from_file(tmp_path / "frac.yml")
+    with pytest.raises(ValueError, match="empty marker map"):
+        MarkerMap({}).to_file(tmp_path / "empty.yml")
+    assert not (tmp_path / "empty.yml").exists()

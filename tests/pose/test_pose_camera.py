@@ -231,3 +231,17 @@ def test_fisheye_camera_checks_its_model_and_keeps_it():
         Camera(K, np.zeros(5), model="fisheye")
     with pytest.raises(ValueError, match="model must be one of"):
         Camera(K, model="orthographic")
+
+
+def test_extra_nodes_are_checked_before_the_file_is_opened(tmp_path: Path) -> None:
+    cam = Camera(np.array([[500.0, 0, 320], [0, 500.0, 240], [0, 0, 1]]), size=(640, 480))
+    cam.to_file(tmp_path / "ok.yml", extra={"per_view_rms_px": [0.1, 0.2, 0.3], "views_used": 3, "note": "lab"})
+    fs = cv2.FileStorage(str(tmp_path / "ok.yml"), cv2.FILE_STORAGE_READ)
+    assert fs.getNode("per_view_rms_px").mat().ravel().tolist() == pytest.approx([0.1, 0.2, 0.3])
+    assert fs.getNode("views_used").real() == 3 and fs.getNode("note").string() == "lab"
+    fs.release()
+    with pytest.raises(TypeError, match="per_view"):
+        cam.to_file(tmp_path / "bad.yml", extra={"per_view": {"a": 1}})
+    with pytest.raises(ValueError, match="node name"):
+        cam.to_file(tmp_path / "bad.yml", extra={"2 views": 1.0})
+    assert not (tmp_path / "bad.yml").exists()  # nothing half-written

@@ -82,7 +82,23 @@ class Calibration:
         return Camera(self.K, self.dist, size=self.size, model="fisheye" if self.model == "fisheye" else "pinhole")
 
     def project(self, points: NDArray, view: int) -> FloatArray:
-        """Pixels (N, 2) of board points (N, 3) in the ``view``-th used view (its solved pose)."""
+        """Pixels (N, 2) of board points (N, 3) in the ``view``-th used view (its solved pose).
+
+        Parameters
+        ----------
+        points : array_like (N, 3) or (3,)
+            Points in the board's frame, board units (those of ``chessboard_corners``); one
+            point (3,) gives one row.
+        view : int
+            Index into the used views (:attr:`rvecs`, :attr:`tvecs`, :attr:`per_view`), not
+            into the list given to :func:`calibrate` (``views[view]`` is that one's index).
+
+        Returns
+        -------
+        ndarray (N, 2) float64
+            Their pixels under ``K`` and ``dist`` (the model's projection, distortion
+            included); points behind the camera give meaningless pixels.
+        """
         R = cv2.Rodrigues(np.asarray(self.rvecs[view], np.float64))[0]
         return self.camera.project(np.asarray(points, np.float64) @ R.T + self.tvecs[view])
 

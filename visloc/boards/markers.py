@@ -58,6 +58,18 @@ class MarkerBoard:
     def from_file(cls, path: str | Path, dictionary: str | None = None) -> MarkerBoard:
         """A marker map file (``MarkerMap.to_file``) as a board.
 
+        Parameters
+        ----------
+        path : str or Path
+            The marker map file (OpenCV FileStorage YAML), corners in the map frame (m by
+            convention).
+        dictionary : str, optional
+            The markers' dictionary (default: the one the file records, else ``DICT_4X4_50``).
+
+        Returns
+        -------
+        MarkerBoard
+
         Raises
         ------
         ValueError
@@ -66,7 +78,19 @@ class MarkerBoard:
         return cls(MarkerMap.from_file(path), dictionary)
 
     def row(self, marker_id: int) -> int | None:
-        """The marker's position in the map (its points are rows ``4 row .. 4 row + 3``), or None."""
+        """The marker's position in the map (its points are rows ``4 row .. 4 row + 3``), or None.
+
+        Parameters
+        ----------
+        marker_id : int
+            A marker id.
+
+        Returns
+        -------
+        int or None
+            Its index ``k`` in :attr:`ids` (the map's order), so its corners are rows
+            ``4 k .. 4 k + 3`` of ``chessboard_corners``; None when the map has no such marker.
+        """
         return self._row.get(int(marker_id))
 
 

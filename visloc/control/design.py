@@ -106,7 +106,26 @@ class ControlSpecs:
     position: LoopSpec = field(default_factory=lambda: LoopSpec(3.5, 50.0, 0.05))
 
     def for_loop(self, loop: str) -> LoopSpec:
-        """The specification of ``loop`` (one of :data:`LOOPS`)."""
+        """The specification of ``loop`` (one of :data:`LOOPS`).
+
+        Parameters
+        ----------
+        loop : str
+            A loop's name (:data:`LOOPS`) or one of its aliases (:data:`LOOP_ALIASES`).
+
+        Returns
+        -------
+        LoopSpec
+            :attr:`attitude` for roll and pitch, :attr:`position` for x and y, else :attr:`yaw`
+            or :attr:`height`.
+
+        Raises
+        ------
+        TypeError
+            ``loop`` is not a str (:func:`loop_name`).
+        ValueError
+            ``loop`` is neither a loop nor an alias (:func:`loop_name`).
+        """
         name = loop_name(loop)
         if name in ("roll", "pitch"):
             return self.attitude
@@ -145,7 +164,26 @@ class ControllerGains:
     specs: ControlSpecs | None = None
 
     def loop(self, name: str) -> LoopGains:
-        """The gains of ``name`` (one of :data:`LOOPS` or :data:`LOOP_ALIASES`)."""
+        """The gains of ``name`` (one of :data:`LOOPS` or :data:`LOOP_ALIASES`).
+
+        Parameters
+        ----------
+        name : str
+            One of :data:`LOOPS` or an alias of :data:`LOOP_ALIASES` (``"attitude"``: roll,
+            ``"position"``: x).
+
+        Returns
+        -------
+        LoopGains
+            That loop's field.
+
+        Raises
+        ------
+        TypeError
+            ``name`` is not a str (:func:`loop_name`).
+        ValueError
+            ``name`` is neither a loop nor an alias (:func:`loop_name`).
+        """
         return getattr(self, loop_name(name))
 
     def K(self, integral: bool = True) -> FloatArray:

@@ -218,7 +218,19 @@ class Figure8Trajectory:
 
     def sample(self, t: float) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         """As :meth:`MinJerkTrajectory.sample` (at rest at the centre before the start and after
-        the end)."""
+        the end).
+
+        Parameters
+        ----------
+        t : float
+            Time, s, on the clock of ``start``.
+
+        Returns
+        -------
+        tuple of 4 ndarrays (3,)
+            Position, velocity, acceleration and jerk: m, m/s, m/s^2, m/s^3, in the frame of
+            ``centre`` (z constant: the eight is flown level).
+        """
         u = min(1.0, max(0.0, (t - self.start) / self.duration))
         if u in (0.0, 1.0):
             zero = np.zeros(3)

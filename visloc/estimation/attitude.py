@@ -138,7 +138,8 @@ class GyroIntegrator:
     Attributes
     ----------
     skipped : int
-        Samples ignored because the gyro reading was not finite.
+        Samples ignored (the angles held): a gyro reading that was not finite, or a sample at
+        gimbal lock (``|cos(pitch)| < 1e-9``, where ``Q(lambda)`` is undefined).
     """
 
     def __init__(self, roll: float = 0.0, pitch: float = 0.0, yaw: float = 0.0) -> None:
@@ -146,7 +147,22 @@ class GyroIntegrator:
         self.reset(roll, pitch, yaw)
 
     def reset(self, roll: float = 0.0, pitch: float = 0.0, yaw: float = 0.0) -> None:
-        """Set the integrator to the given Euler angles (rad); ``skipped`` is kept."""
+        """Set the integrator to the given Euler angles (rad); ``skipped`` is kept.
+
+        Parameters
+        ----------
+        roll, pitch, yaw : float
+            Z-Y-X Euler angles, rad; normalised to roll, yaw in ``[-pi, pi)`` and pitch in
+            ``[-pi/2, pi/2]`` (a pitch beyond +-pi/2 is the same rotation with roll and yaw
+            turned by pi).
+
+        Raises
+        ------
+        TypeError
+            An angle is not a real number.
+        ValueError
+            An angle is not finite.
+        """
         self.roll, self.pitch, self.yaw = _normalise(
             check_real(roll, "roll"), check_real(pitch, "pitch"), check_real(yaw, "yaw"))
 
@@ -168,7 +184,8 @@ class GyroIntegrator:
         Parameters
         ----------
         gyro : array_like (3,)
-            Body rates ``(p, q, r)``, rad/s. Non-finite: sample skipped and counted.
+            Body rates ``(p, q, r)``, rad/s. A non-finite reading, or a sample at gimbal lock
+            (``|cos(pitch)| < 1e-9``), is skipped (the angles held) and counted in ``skipped``.
         dt : float
             Time since the previous sample, s, > 0.
 
@@ -188,10 +205,28 @@ class GyroIntegrator:
     def run(self, gyro: object, dt: object) -> FloatArray:
         """Integrate a sequence: ``gyro`` (N, 3) rad/s, ``dt`` s scalar or (N,).
 
+        Same result as repeated :meth:`update`.
+
+        Parameters
+        ----------
+        gyro : array_like (N, 3)
+            Body rates ``(p, q, r)``, rad/s, body axes. A row with a non-finite value is
+            skipped (the angles held) and counted in ``skipped``; so is a sample at gimbal lock
+            (``|cos(pitch)| < 1e-9``).
+        dt : float or array_like (N,)
+            Step before each sample, s, > 0.
+
         Returns
         -------
         ndarray (N, 3)
             ``[roll, pitch, yaw]`` (rad) after each sample.
+
+        Raises
+        ------
+        TypeError
+            ``gyro`` or ``dt`` is not numeric.
+        ValueError
+            ``gyro`` not (N, 3), ``dt`` neither a number nor (N,), or a step not finite and > 0.
         """
         g = as_float_array(gyro, "gyro", (None, 3))
         steps = check_dt_sequence(dt, len(g)).tolist()
@@ -256,9 +291,13 @@ class ComplementaryFilter(_FusedAttitude):
     bias : ndarray (3,)
         Current gyro bias estimate, rad/s (stays zero when ``bias_gain == 0``).
     elapsed : float
-        Time integrated since initialisation, s (drives the fast start).
+        Time integrated since the filter was initialised (by ``initial``, the first usable
+        sample or the last :meth:`reset`), s (drives the fast start).
     skipped : int
-        Samples ignored because a reading was not finite.
+        Samples ignored (the state unchanged) because a reading was not finite, or, for
+        readings too large to integrate, the new estimate was not. A sample at gimbal lock
+        (``|cos(pitch)| < 1e-9``) is not counted: it re-initialises the estimate from the
+        accelerometer.
     """
 
     def __init__(self, crossover_hz: float | None = None, *, gain: float | None = None,
@@ -286,13 +325,37 @@ class ComplementaryFilter(_FusedAttitude):
         return np.array(self._b)
 
     def reset(self, roll: float, pitch: float, *, bias: object = None) -> None:
-        """Set the estimate to ``(roll, pitch)`` (rad); the bias estimate is kept unless given."""
-        super().reset(roll, pitch)
+        """Set the estimate to ``(roll, pitch)`` (rad); the bias estimate is kept unless given.
+
+        A new initialisation: the filter counts as initialised afterwards and ``elapsed`` is set
+        to 0, so the fast start (``settle_seconds``) runs again; ``skipped`` is kept. Nothing
+        changes when an argument is refused.
+
+        Parameters
+        ----------
+        roll, pitch : float
+            The estimate, rad; normalised to roll in ``[-pi, pi)``, pitch in ``[-pi/2, pi/2]``.
+        bias : array_like (3,), optional
+            New gyro bias estimate ``(b_p, b_q, b_r)``, rad/s, body axes; None keeps the current
+            one.
+
+        Raises
+        ------
+        TypeError
+            ``roll`` or ``pitch`` is not a real number, or ``bias`` is not numeric.
+        ValueError
+            ``roll`` or ``pitch`` not finite, or ``bias`` not (3,) or not finite.
+        """
+        check_real(roll, "roll")
+        check_real(pitch, "pitch")
         if bias is not None:
             b = as_float_array(bias, "bias", (3,))
             if not np.all(np.isfinite(b)):
                 raise ValueError("bias must be finite")
+        super().reset(roll, pitch)
+        if bias is not None:
             self._b = [float(v) for v in b]
+        self.elapsed = 0.0
 
     def _step(self, p: float, q: float, r: float, fx: float, fy: float, fz: float,
               dt: float) -> None:

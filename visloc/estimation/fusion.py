@@ -86,9 +86,9 @@ class MapFixFusion:
 
     @property
     def position_std(self) -> FloatArray:
-        """Standard deviation of the position (3,), m (NaN before the first fix)."""
-        if self.kf.P is None:
-            return np.full(3, np.nan)
+        """The filter's current standard deviation of the position (3,), m; never NaN: before
+        the first fix, the prior's (``initial_std``, or 1000 m per axis without
+        ``initial_position``) grown by the predictions since."""
         return np.sqrt(np.clip(np.diag(self.kf.P)[:: self.kf.order], 0, None))
 
     def predict(self, t: float, specific_force: ArrayLike | None = None, attitude: ArrayLike | None = None, *,
@@ -121,7 +121,35 @@ class MapFixFusion:
 
     def fix(self, position: ArrayLike, covariance: ArrayLike | None = None) -> bool:
         """Correct with one position fix (3,), m, and its covariance (3, 3), m^2 (``None``:
-        ``fix_std``); the floor ``min_fix_std`` is added. Returns whether the gate let it in."""
+        ``fix_std``, at least ``min_fix_std``); the floor ``min_fix_std^2 I`` is added to a given
+        covariance. Returns whether the gate let it in.
+
+        Parameters
+        ----------
+        position : array_like (3,)
+            The fix, m, in the filter's axes (e.g. :attr:`visloc.pose.MapPose.position`, map
+            frame).
+        covariance : array_like (3, 3), optional
+            Its covariance, m^2 (e.g. :attr:`visloc.pose.MapPose.position_covariance`); the
+            filter uses ``covariance + min_fix_std^2 I``. None: ``max(fix_std, min_fix_std)^2 I``.
+
+        Returns
+        -------
+        bool
+            Whether the fix was used (counted in ``fixes``); False when the gate rejected it or
+            the position or covariance was not finite (counted in ``rejected``). A fix beyond
+            the gate after ``reset_after`` rejections in a row resets the filter on it and
+            counts as used (:class:`PositionVelocityKF`).
+
+        Raises
+        ------
+        TypeError
+            ``position`` or ``covariance`` is not numeric.
+        ValueError
+            No time yet (:meth:`predict` never called), ``position`` not (3,), ``covariance``
+            not (3, 3), or its sum with the floor not symmetric positive definite
+            (:meth:`PositionVelocityKF.update_position`).
+        """
         floor = self.min_fix_std**2 * np.eye(3)
         if covariance is None:
             R = max(self.fix_std, self.min_fix_std) ** 2 * np.eye(3)

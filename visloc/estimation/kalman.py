@@ -50,7 +50,8 @@ in place of the unknown manoeuvre.
 Measurements are gated: an innovation ``y = z - H x`` with ``S = H P H^T + R`` is rejected when its
 squared Mahalanobis distance ``y^T S^-1 y`` exceeds the ``gate`` quantile of the chi-square
 distribution with ``dim(z)`` degrees of freedom. Non-finite measurements are skipped. Both are
-counted, and neither changes the state.
+counted, and neither changes the state. A measurement refused with an error (bad shape, ``R`` or
+``std``) changes nothing, not even the clock: its ``t=`` is predicted to only after the checks.
 """
 
 from __future__ import annotations
@@ -318,6 +319,33 @@ class PositionVelocityKF:
         ``order_by_dim`` layout, which is the layout of ``x``. ``var`` follows ``accel_noise`` and
         ``accel_noise_kind``, or is ``accel_std^2`` when ``accel_std`` (m/s^2, per step) is given.
         The arrays are read-only (kept for the next step of the same length).
+
+        Parameters
+        ----------
+        dt : float
+            Step length, s (>= 0). ``dt = 0`` gives ``F = I`` and ``Q = 0``, except with
+            ``model="ca"`` and a per-step ``var`` (``accel_noise_kind="std"`` or ``accel_std``):
+            filterpy's formula then leaves ``var`` on each acceleration's diagonal
+            (``G = [0, 0, 1]``). :meth:`predict` never takes a zero-length step.
+        accel_std : float, optional
+            Standard deviation of the acceleration input's error per step, m/s^2 (> 0):
+            ``var = accel_std^2`` whatever ``accel_noise_kind``. None: ``var`` from
+            ``accel_noise``.
+
+        Returns
+        -------
+        F : ndarray (dim_x, dim_x)
+            State transition, ``kron(I_dims, F_axis)`` (module docstring), read-only.
+        Q : ndarray (dim_x, dim_x)
+            Process noise covariance (units of ``x`` times ``x``: m^2, m^2/s, m^2/s^2, ...),
+            read-only.
+
+        Raises
+        ------
+        TypeError
+            ``dt`` or ``accel_std`` is not a real number.
+        ValueError
+            ``dt`` not finite or < 0, or ``accel_std`` not finite or <= 0.
         """
         F, Q, _ = self._step(dt, accel_std)
         return F, Q
@@ -435,13 +463,13 @@ class PositionVelocityKF:
         return 0.5 * (cov + cov.T)
 
     def _update(self, kind: str, z: object, R: object, std: object, t: float | None) -> bool:
-        if t is not None:
-            self.predict(t)
-        if self.t is None:
+        if t is None and self.t is None:
             raise ValueError(f"no time yet for the {kind} measurement: pass t= or call "
                              f"predict(t) first")
-        zz = as_float_array(z, "z", (self.dims,))
+        zz = as_float_array(z, "z", (self.dims,))  # checked before predict moves the clock
         cov = self._measurement_cov(R, std, kind)
+        if t is not None:
+            self.predict(t)
         if cov is None or not np.all(np.isfinite(zz)):
             self.skipped[kind] += 1
             return False
@@ -488,7 +516,7 @@ class PositionVelocityKF:
         std : float or array_like (dims,), optional
             Standard deviation per axis, m, instead of ``R``.
         t : float, optional
-            Time of the measurement, s; if given, :meth:`predict` is called first.
+            Time of the measurement, s; if given, :meth:`predict` runs after the argument checks.
 
         Returns
         -------
@@ -511,7 +539,7 @@ class PositionVelocityKF:
         std : float or array_like (dims,), optional
             Standard deviation per axis, m/s, instead of ``R``.
         t : float, optional
-            Time of the measurement, s; if given, :meth:`predict` is called first.
+            Time of the measurement, s; if given, :meth:`predict` runs after the argument checks.
 
         Returns
         -------
@@ -526,6 +554,33 @@ class PositionVelocityKF:
 
         Same arguments as :meth:`update_velocity` (units m/s^2); ValueError with ``"cv"``
         (feed the accelerometer to :meth:`predict` there).
+
+        Parameters
+        ----------
+        a : array_like (dims,)
+            Measured acceleration, m/s^2, world frame, in the state's axes (gravity removed).
+        R : array_like (dims, dims), optional
+            Its covariance, (m/s^2)^2, symmetric positive definite.
+        std : float or array_like (dims,), optional
+            Standard deviation per axis, m/s^2, instead of ``R``.
+        t : float, optional
+            Time of the measurement, s; if given, :meth:`predict` runs after the argument checks.
+
+        Returns
+        -------
+        bool
+            Whether the measurement was used (False when skipped as non-finite, counted in
+            ``skipped["acceleration"]``, or rejected by the gate, counted in
+            ``rejected["acceleration"]``).
+
+        Raises
+        ------
+        ValueError
+            ``model="cv"``; no time yet (no ``t`` and :meth:`predict` never called); ``a`` not
+            (dims,); both or neither of ``R`` and ``std``; ``std`` <= 0; ``R`` not (dims, dims),
+            not symmetric or not positive definite; or ``t`` as in :meth:`predict`.
+        TypeError
+            ``a``, ``R`` or ``std`` is not numeric, or ``t`` not a real number.
         """
         if self.model != "ca":
             raise ValueError("update_acceleration needs model='ca'; with model='cv' pass "

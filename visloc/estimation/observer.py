@@ -185,7 +185,29 @@ class LuenbergerObserver:
         return v
 
     def gains(self, dt: float) -> tuple[float, float]:
-        """Current-form gains ``(L_1, L_2)`` for a step of ``dt`` seconds (poles ``exp(p dt)``)."""
+        """Current-form gains ``(L_1, L_2)`` for a step of ``dt`` seconds (poles ``exp(p dt)``).
+
+        :func:`luenberger_gains` with ``form="current"`` on the z-plane poles ``exp(p_i dt)``
+        of :attr:`poles`; the last step length's gains are kept for the next call.
+
+        Parameters
+        ----------
+        dt : float
+            Step length, s (> 0).
+
+        Returns
+        -------
+        L_1, L_2 : float
+            Gains on the position innovation (m): ``L_1`` dimensionless into the position,
+            ``L_2`` 1/s into the velocity.
+
+        Raises
+        ------
+        TypeError
+            ``dt`` is not a real number.
+        ValueError
+            ``dt`` not finite or not > 0.
+        """
         dt = check_dt(dt)
         if self._gain_cache[0] != dt:
             l1, l2 = luenberger_gains(np.exp(self.poles * dt), discrete_dt=dt, form="current")

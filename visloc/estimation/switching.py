@@ -50,7 +50,9 @@ class SwitchingFilter(_FusedAttitude):
     resets : int
         How many samples passed the tests (3.6-3.8) and reset the integrator.
     skipped : int
-        Samples ignored because a reading was not finite.
+        Samples ignored (the state unchanged) because a reading was not finite. A sample at
+        gimbal lock (``|cos(pitch)| < 1e-9``, where ``Q(lambda)`` is undefined) that does not
+        pass the tests holds the angles without being counted here.
     """
 
     def __init__(self, delta_n: float, delta_d: float, *, gravity: float = GRAVITY,
@@ -65,7 +67,20 @@ class SwitchingFilter(_FusedAttitude):
     def reset(self, roll: float, pitch: float) -> None:
         """Set the estimate (and the gyro integrator) to ``(roll, pitch)``, rad.
 
-        The norm history used by eq. 3.8 is cleared, so the next sample cannot reset.
+        The norm history used by eq. 3.8 is cleared, so the next sample cannot reset. The
+        filter counts as initialised afterwards; ``resets`` and ``skipped`` are kept.
+
+        Parameters
+        ----------
+        roll, pitch : float
+            The estimate, rad; normalised to roll in ``[-pi, pi)``, pitch in ``[-pi/2, pi/2]``.
+
+        Raises
+        ------
+        TypeError
+            ``roll`` or ``pitch`` is not a real number.
+        ValueError
+            ``roll`` or ``pitch`` is not finite.
         """
         super().reset(roll, pitch)
         self._prev_norm = None

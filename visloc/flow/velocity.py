@@ -244,6 +244,7 @@ class EgoMotion:
     Parameters
     ----------
     camera : Camera
+        Intrinsics of the frames; its ``size`` may be unknown (the frames' own size is used).
     height : float, optional
         Default height (m) when :meth:`update` gets none.
     fps : float, optional
@@ -293,10 +294,42 @@ class EgoMotion:
     ) -> GroundVelocity | None:
         """Add a frame; returns the velocity since the previous frame (None for the first).
 
-        ``height`` is the height when ``image`` was taken (module docstring).
+        ``height`` is the height when ``image`` was taken (module docstring). The first frame
+        only primes the stream: ``dt``, ``height`` and ``gyro`` are not used (nor checked) then.
 
-        Raises ValueError for a frame of another size than the previous one, a missing or
-        non-positive ``dt`` (when no ``fps`` was set) or height.
+        Parameters
+        ----------
+        image : ndarray (H, W) or (H, W, 3) uint8
+            The new frame, the same size as the previous one (BGR turned grey; any image
+            :func:`visloc.images.as_gray` takes).
+        dt : float, optional
+            Time since the previous frame, s (> 0); default ``1 / fps``.
+        height : float, optional
+            Distance from the camera to the ground along the optical axis when ``image`` was
+            taken, m (> 0); default the stream's ``height``.
+        gyro : array_like (3,), optional
+            Body rates (wx, wy, wz), rad/s, about the camera axes since the previous frame; wx
+            and wy are removed from the flow (:func:`ground_velocity`).
+
+        Returns
+        -------
+        GroundVelocity or None
+            Velocity (m/s) in the previous frame's camera axes and yaw rate (rad/s) over the
+            pair, with its quality (0 and zero velocity when the motion had no support); None
+            for the first frame. Its displacement ``v dt`` (turned into the first frame's axes)
+            and yaw ``yaw_rate dt`` are integrated into :attr:`track`.
+
+        Raises
+        ------
+        TypeError
+            ``image`` is not a numpy array or has an unsupported pixel type
+            (:func:`visloc.images.as_gray`), or ``dt`` or the height is not a number.
+        ValueError
+            ``image`` of an unsupported shape or with non-finite pixels; a frame of another size
+            than the previous one or smaller than 16 x 16 px; ``dt`` missing when no ``fps`` was
+            set, or a height missing when no default was set; ``dt`` or the height not finite
+            and > 0; ``gyro`` not three finite rates (checked when the pair's motion has
+            support); an unknown ``method`` in ``options``.
         """
         from visloc.images import as_gray
 
@@ -367,7 +400,8 @@ class EgoMotion:
             return None, True
         self._anchor = (anchor, quality, age + 1)
         motion = replace(found, method=method + "+tracked")
-        gv = ground_velocity(motion, self.camera, height, dt, gyro=gyro)
+        h, w = frames[0].shape  # no FlowField here: the frames' own size, as on the block-sum path
+        gv = ground_velocity(motion, replace(self.camera, size=(w, h)), height, dt, gyro=gyro)
         return replace(gv, quality=quality * min(1.0, anchor / spread), reason=""), False
 
     @property

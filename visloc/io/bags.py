@@ -43,7 +43,22 @@ _CHANNELS = {"mono8": (1, None), "8UC1": (1, None), "mono16": (1, None), "16UC1"
 
 
 def is_recording(path: str | os.PathLike[str]) -> bool:
-    """Whether ``path`` is a ROS 1 bag, a lone MCAP file or a ROS 2 bag folder."""
+    """Whether ``path`` is a ROS 1 bag, a lone MCAP file or a ROS 2 bag folder.
+
+    Only the name is looked at, not the contents: a file counts when its suffix is ``.bag``
+    or ``.mcap`` (any case), a folder when it holds a ``metadata.yaml`` file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file or folder to look at.
+
+    Returns
+    -------
+    bool
+        True for a ``.bag`` or ``.mcap`` file or a folder with ``metadata.yaml``; False
+        otherwise, and for a path that does not exist.
+    """
     p = Path(path)
     if p.is_file():
         return p.suffix.lower() in (".bag", ".mcap")
@@ -74,9 +89,21 @@ def _open(path: str | os.PathLike[str]):
 
 
 def recording_topics(path: str | os.PathLike[str]) -> list[dict]:
-    """The topics of a recording: ``topic``, ``type`` (ROS 2 style name), ``count`` and
-    ``rate_hz`` (messages per second between the topic's first and last log times, ``None``
-    for fewer than two; the whole recording is read once for them).
+    """The topics of a recording, with their message types, counts and rates.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A ``.bag`` file, a ``.mcap`` file or a ROS 2 bag folder.
+
+    Returns
+    -------
+    list of dict
+        One dict per topic, sorted by topic name: ``topic`` (str), ``type`` (str, ROS 2
+        style name such as ``"sensor_msgs/msg/Image"``), ``count`` (int, messages over all
+        the topic's connections) and ``rate_hz`` (float, messages per second between the
+        topic's first and last log times, ``(count - 1) / span``; ``None`` for fewer than two
+        messages or no time between them). The whole recording is read once for the rates.
 
     Raises
     ------

@@ -220,14 +220,36 @@ class MavlinkSink:
             self._queue.put_nowait(buf)
 
     def heartbeat(self, time_s: float) -> None:
-        """Send a ``HEARTBEAT`` (onboard controller, no autopilot) when ``heartbeat_period``
-        of frame time has passed since the last (and at the first call)."""
-        if self._next_beat is not None and time_s < self._next_beat:
+        """Send a ``HEARTBEAT`` (onboard controller, no autopilot) when one is due.
+
+        Beats are due at the first call's time plus whole multiples of ``heartbeat_period``
+        (frame time): a call sends one when a due time has been reached since the last beat,
+        and after a gap in the frames the next is due at the first of those times after
+        ``time_s`` (one beat, not a burst of the missed ones). A time before the last beat's
+        (the frame clock started again: a new recording) sends one at once and counts the
+        beats from there. The ``send_*`` methods call it before each message.
+
+        Parameters
+        ----------
+        time_s : float
+            The frame's time, s (the same clock as the ``send_*`` methods' ``time_s``).
+
+        Raises
+        ------
+        ValueError
+            ``time_s`` not a finite time >= 0 (nothing is sent).
+        """
+        _usec(time_s)  # checked before anything goes out
+        due = self._next_beat
+        if due is not None and due - self._period <= time_s < due:
             return
         m = self._mav
         self._send(m.MAVLink_heartbeat_message(m.MAV_TYPE_ONBOARD_CONTROLLER, m.MAV_AUTOPILOT_INVALID, 0, 0,
                                                m.MAV_STATE_ACTIVE, 3))
-        self._next_beat = (time_s if self._next_beat is None else self._next_beat) + self._period
+        if due is None or time_s < due - self._period:  # the first beat, or the clock went back
+            self._next_beat = time_s + self._period
+            return
+        self._next_beat = due + self._period
         while self._next_beat <= time_s:  # a gap in the frames: the next beat is still ahead
             self._next_beat += self._period
 

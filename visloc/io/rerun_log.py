@@ -163,16 +163,7 @@ class RerunLogger(Closing):
         TypeError
             If ``image`` is not a uint8 array or ``camera`` has no ``K``.
         """
-        if self._closed:
-            raise ValueError(f"cannot log to closed RerunLogger({self.path})")
-        if isinstance(index, bool) or not isinstance(index, (int, np.integer)):
-            raise TypeError(f"index must be an int, got {type(index).__name__}")
-        if (
-            isinstance(time, bool)
-            or not isinstance(time, (int, float, np.integer, np.floating))
-            or not math.isfinite(time)
-        ):
-            raise ValueError(f"time must be a finite number of seconds, got {time!r}")
+        self._check_frame(index, time)
         detections = list(detections)
         corners = [self._corners(d, i) for i, d in enumerate(detections)]
         poses = None if poses is None else list(poses)
@@ -218,8 +209,23 @@ class RerunLogger(Closing):
         )
         self._log_poses(ids, poses, marker_length)
 
+    def _check_frame(self, index: int, time: float) -> None:
+        """Raise unless the logger is open, ``index`` an int and ``time`` a finite number."""
+        if self._closed:
+            raise ValueError(f"cannot log to closed RerunLogger({self.path})")
+        if isinstance(index, bool) or not isinstance(index, (int, np.integer)):
+            raise TypeError(f"index must be an int, got {type(index).__name__}")
+        if (
+            isinstance(time, bool)
+            or not isinstance(time, (int, float, np.integer, np.floating))
+            or not math.isfinite(time)
+        ):
+            raise ValueError(f"time must be a finite number of seconds, got {time!r}")
+
     def _frame(self, index: int, time: float, image: NDArray[np.uint8] | None):
-        """Set both timelines and log the image (if any); returns the recording stream."""
+        """Check the frame (:meth:`_check_frame`), set both timelines and log the image (if
+        any); returns the recording stream."""
+        self._check_frame(index, time)
         rec = self.recording
         rec.set_time("frame", sequence=int(index))
         rec.set_time("time", duration=float(time))
@@ -238,13 +244,39 @@ class RerunLogger(Closing):
         velocity: Any | None,
         position: Sequence[float] | None = None,
     ) -> None:
-        """Log one frame of a ground-velocity run: the image, the block flow vectors
-        (``camera/image/flow``), the velocity, yaw rate and quality as scalar plots
-        (``plots/vx``, ``plots/vy``, ``plots/yaw_rate``, ``plots/quality``) and the integrated
-        position (``track/position``, a growing line in metres).
+        """Log one frame of a ground-velocity run.
 
-        ``field`` is a :class:`visloc.types.FlowField` (or None), ``velocity`` a
-        :class:`visloc.types.GroundVelocity` (or None for the first frame).
+        Logs the image, the block flow vectors (``camera/image/flow``), the velocity, yaw rate
+        and quality as scalar plots (``plots/vx``, ``plots/vy``, ``plots/yaw_rate``,
+        ``plots/quality``) and the integrated position (``track/position``, a growing line in
+        metres).
+
+        Parameters
+        ----------
+        index, time : int, float
+            As for :meth:`log_frame`: the ``frame`` and ``time`` (s) timelines.
+        image : ndarray (H, W) or (H, W, 3) uint8, or None
+            Grey or BGR image (converted to RGB); ``None``: no image is logged for this frame
+            (the viewer keeps showing the last one).
+        field : FlowField or None
+            The block flow of the frame pair (:class:`visloc.types.FlowField`): the vectors of
+            blocks with ``confidence > 0.2`` are drawn as arrows from their centres, px (pixel
+            centres at integers, shifted by half a pixel for rerun); None: no arrows.
+        velocity : GroundVelocity or None
+            The ground velocity of the frame pair (:class:`visloc.types.GroundVelocity`): ``v``
+            (m/s, camera x and y axes), ``yaw_rate`` (rad/s) and ``quality`` are plotted; None
+            for the first frame (nothing plotted).
+        position : sequence of float, optional
+            Integrated ``(x, y)`` position, m (e.g. ``EgoMotion.position``, the first frame's
+            camera axes), appended to the track; None: the track is not extended.
+
+        Raises
+        ------
+        ValueError
+            If the logger is closed or ``time`` is not finite.
+        TypeError, ValueError
+            If ``index`` is not an int, or ``image`` is not a usable image
+            (:func:`visloc.images.check_image`).
         """
         rec = self._frame(index, time, image)
         if field is not None and len(field.centers):
@@ -262,9 +294,27 @@ class RerunLogger(Closing):
 
     def log_localize(self, index: int, time: float, image: NDArray[np.uint8] | None,
                      estimate: Sequence[float], truth: Sequence[float] | None = None) -> None:
-        """Log one frame of a localisation run: the image, the estimated position (and the
-        true one when known) as scalar plots (``plots/x`` ...), and both tracks in 3-D
-        (``world/estimate``, ``world/truth``)."""
+        """Log one frame of a localisation run.
+
+        Logs the image, the estimated position (and the true one when known) as scalar plots
+        (``plots/x/estimate``, ``plots/x/truth``, ... for x, y and z), and both tracks in 3-D
+        (``world/estimate``, ``world/truth``, growing lines).
+
+        Parameters
+        ----------
+        index, time, image
+            As for :meth:`log_flow` (``None``: the viewer keeps showing the last image).
+        estimate : sequence of float (3,)
+            Estimated camera position ``(x, y, z)``, m, map frame.
+        truth : sequence of float (3,), optional
+            True position in the same frame and units; None (unknown): nothing is logged for it.
+
+        Raises
+        ------
+        TypeError, ValueError
+            As for :meth:`log_flow`: a closed logger, a ``time`` that is not finite, an
+            ``index`` that is not an int or an unusable ``image``.
+        """
         rec = self._frame(index, time, image)
         for name, p in (("estimate", estimate), ("truth", truth)):
             if p is None:

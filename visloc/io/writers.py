@@ -148,10 +148,16 @@ class JsonlWriter(Closing):
         Values are converted with :func:`to_jsonable` (numpy types, arrays, ``Pose`` and
         ``MarkerDetection`` objects; NaN and inf become ``null``).
 
+        Parameters
+        ----------
+        obj : Mapping
+            The record, e.g. ``{"frame": 0, "markers": detections}``; keys become strings
+            (non-str keys as their JSON text), values as :func:`to_jsonable` converts them.
+
         Raises
         ------
         TypeError
-            If ``obj`` is not a mapping or holds a value with no JSON form.
+            If ``obj`` is not a mapping or holds a key or value with no JSON form.
         ValueError
             If the writer is closed.
         """
@@ -221,10 +227,18 @@ class CsvWriter(Closing):
     def write(self, row: Mapping[str, Any]) -> None:
         """Write one row and flush it.
 
+        Parameters
+        ----------
+        row : Mapping
+            Column name -> value; columns left out are empty cells. Values are converted as
+            the class notes say (:func:`to_jsonable`; ``None``, NaN and inf: empty cells; lists,
+            arrays and dicts: compact JSON text).
+
         Raises
         ------
         TypeError
-            If ``row`` is not a mapping.
+            If ``row`` is not a mapping, or holds a value with no JSON form (nothing is
+            written then).
         ValueError
             If ``row`` has keys not in ``fieldnames`` or the writer is closed.
         """

@@ -405,7 +405,31 @@ class MarkerDetector:
         return f"MarkerDetector({self.dictionary.name!r}, {self.params})"
 
     def detect(self, image: NDArray[np.uint8]) -> list[MarkerDetection]:
-        """Markers in ``image`` (uint8 grey or BGR), sorted by id."""
+        """Markers in ``image`` (uint8 grey or BGR), sorted by id.
+
+        Runs stages 1-10 (module docstring) with this detector's :class:`DetectorParams`.
+
+        Parameters
+        ----------
+        image : ndarray (H, W) or (H, W, 3) uint8
+            The frame, grey or BGR (other forms as :func:`visloc.markers.binarize.to_gray`
+            accepts them: (H, W, 1), BGRA, uint16, floating point).
+
+        Returns
+        -------
+        list of MarkerDetection
+            The markers found, sorted by id (then by corner 0's y and x), duplicates (one
+            marker found twice) merged. Each has ``corners`` (4, 2), px in full-resolution
+            image coordinates (pixel centres at integers), clockwise from the marker's own
+            top-left. Empty when none is found.
+
+        Raises
+        ------
+        TypeError, ValueError
+            If ``image`` is not a usable image (:func:`visloc.images.check_image`: not a numpy
+            array, an unsupported pixel type or shape, smaller than 2 x 2, NaN or infinite
+            pixels).
+        """
         return self._run(image, None)
 
     def confirm(self, image: NDArray[np.uint8], quads: NDArray, ids: NDArray, *,
@@ -457,7 +481,27 @@ class MarkerDetector:
                 for d, k in zip(made, want.tolist(), strict=True)]
 
     def trace(self, image: NDArray[np.uint8]) -> DetectionTrace:
-        """Run :meth:`detect` keeping every stage's intermediate result."""
+        """Run :meth:`detect` keeping every stage's intermediate result.
+
+        Parameters
+        ----------
+        image : ndarray (H, W) or (H, W, 3) uint8
+            As for :meth:`detect`.
+
+        Returns
+        -------
+        DetectionTrace
+            The grey image (stage 1, before any inversion for ``inverted=True``), every search
+            pass (:class:`PassTrace`), every candidate with the stage where it stopped
+            (:class:`CandidateTrace`) and the detections, as :meth:`detect` returns them. With
+            ``inverted="both"`` the passes and candidates are those of the black-on-white
+            search only; the detections are of both polarities.
+
+        Raises
+        ------
+        TypeError, ValueError
+            As for :meth:`detect`.
+        """
         log: dict = {"candidates": [], "passes": []}
         dets = self._run(image, log)
         return DetectionTrace(log["gray"], log["passes"], log["candidates"], dets)

@@ -67,6 +67,26 @@ class Dictionary:
         """Draw marker ``marker_id`` as a uint8 image, black border included, no white margin.
 
         The image is ``(s + 2 * border_bits) * cell_px`` pixels square, 0 = black, 255 = white.
+
+        Parameters
+        ----------
+        marker_id : int
+            Index of the marker in the dictionary, ``0 <= marker_id < len(self)``.
+        cell_px : int
+            Side of one cell (bit), px, >= 1.
+        border_bits : int
+            Width of the black border, cells (>= 0; 1 is the ArUco default).
+
+        Returns
+        -------
+        ndarray (S, S) uint8
+            The marker, ``S = (s + 2 * border_bits) * cell_px`` px, row 0 at the marker's
+            top (``bits[marker_id]`` unrotated).
+
+        Raises
+        ------
+        ValueError
+            If ``marker_id`` is not in ``[0, len(self) - 1]`` or ``cell_px`` < 1.
         """
         if not 0 <= marker_id < len(self):
             raise ValueError(f"marker_id must be in [0, {len(self) - 1}], got {marker_id}")
@@ -78,9 +98,24 @@ class Dictionary:
     def match(self, bits: NDArray[np.uint8], max_errors: int) -> tuple[int, int, int] | None:
         """Find the marker closest to an observed ``(s, s)`` bit grid.
 
-        Returns ``(id, rotation, hamming)`` where the observed grid equals
-        ``np.rot90(self.bits[id], rotation)`` up to ``hamming`` flipped bits, or ``None``
-        when no marker is within ``max_errors`` bits.
+        Every marker is compared in its four rotations (Hamming distance of the packed
+        :attr:`codes`); of equally close ones the lowest id, then the lowest rotation, wins.
+
+        Parameters
+        ----------
+        bits : ndarray (s, s)
+            The observed cells without the border, 0/1 (1 = white), laid out as :attr:`bits`
+            holds a marker's.
+        max_errors : int
+            Most flipped bits accepted.
+
+        Returns
+        -------
+        tuple of (int, int, int) or None
+            ``(id, rotation, hamming)`` where the observed grid equals
+            ``np.rot90(self.bits[id], rotation)`` (``rotation`` quarter turns counter-clockwise,
+            0-3) up to ``hamming`` flipped bits, or ``None`` when no marker is within
+            ``max_errors`` bits.
         """
         code = pack_bits(bits)
         dist = np.bitwise_count(self.codes ^ code)

@@ -14,6 +14,7 @@ is OpenCV's (x right, y down, z forward).
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -218,11 +219,24 @@ class Camera:
         ``distortion_model`` (optional: ``fisheye`` gives a fisheye camera, any other value or
         none a pinhole one, as ``visloc calibrate --model`` writes it).
 
+        Parameters
+        ----------
+        path : str or Path
+            The camera file (e.g. ``calib/*.yml``).
+
+        Returns
+        -------
+        Camera
+            ``K`` (px), distortion coefficients, ``size`` ``(width, height)`` px or None, and
+            the model.
+
         Raises
         ------
         ValueError
-            When the file is missing, unreadable or its contents are malformed; the message
-            names the path and the problem.
+            When the file is missing, empty or not OpenCV FileStorage, has no
+            ``camera_matrix``, a matrix node that is not an ``opencv-matrix``, a non-integer
+            ``image_width`` / ``image_height`` or only one of them, or values
+            :class:`Camera` rejects; the message names the path and the problem.
         """
         path = Path(path)
         fs = open_storage(path, "camera file")
@@ -275,11 +289,34 @@ class Camera:
         return int(node.real())
 
     def to_file(self, path: str | Path, *, extra: dict | None = None) -> None:
-        """Write OpenCV FileStorage YAML (``camera_matrix``, ``distortion_coefficients`` and,
-        when ``size`` is known, ``image_width`` / ``image_height``; ``distortion_model:
-        fisheye`` for a fisheye camera), then the nodes of ``extra`` (name -> number, string or
-        array; e.g. a calibration's figures)."""
+        """Write OpenCV FileStorage YAML that :meth:`from_file` reads back.
+
+        Writes ``image_width`` / ``image_height`` when ``size`` is known, ``camera_matrix``,
+        ``distortion_coefficients`` (a column), then the nodes of ``extra`` and, for a fisheye
+        camera, ``distortion_model: fisheye``. The file is YAML whatever its extension.
+
+        Parameters
+        ----------
+        path : str or Path
+            The file to write; an existing file is overwritten, the folder must exist.
+        extra : dict, optional, keyword-only
+            More nodes, name -> number, string or array of numbers (a list or ndarray, written
+            as a float64 matrix; e.g. a calibration's figures), written as
+            ``cv2.FileStorage.write`` writes them.
+
+        Raises
+        ------
+        TypeError
+            If an ``extra`` value is none of those (checked before the file is opened: no
+            half-written file).
+        ValueError
+            If an ``extra`` name is not a FileStorage node name (a letter or ``_``, then
+            letters, digits, ``_`` or ``-``), or the file cannot be opened for writing.
+        """
         path = Path(path)
+        nodes = {key: _storage_value(key, value) for key, value in dict(extra or {}).items()}
+        if self.model == "fisheye":
+            nodes["distortion_model"] = "fisheye"
         fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_FORMAT_YAML)
         if not fs.isOpened():
             raise ValueError(f"camera file {str(path)!r} could not be opened for writing")
@@ -289,10 +326,7 @@ class Camera:
                 fs.write("image_height", int(self.size[1]))
             fs.write("camera_matrix", np.ascontiguousarray(self.K))
             fs.write("distortion_coefficients", np.ascontiguousarray(self.dist.reshape(-1, 1)))
-            extra = dict(extra or {})
-            if self.model == "fisheye":
-                extra["distortion_model"] = "fisheye"
-            for key, value in extra.items():
+            for key, value in nodes.items():
                 fs.write(key, value)
         finally:
             fs.release()
@@ -303,6 +337,24 @@ class Camera:
         Pixel centres sit at integer coordinates, so a resize by ``s`` maps ``x`` to
         ``(x + 0.5) * s - 0.5`` (as ``cv2.resize`` does); focal lengths scale by ``s``.
         Distortion coefficients act on normalized coordinates and are unchanged.
+
+        Parameters
+        ----------
+        width, height : int
+            The new image size, px (> 0); x and y scale independently by ``width / size[0]``
+            and ``height / size[1]``.
+
+        Returns
+        -------
+        Camera
+            The scaled ``K``, the same distortion coefficients and model, ``size=(width,
+            height)``.
+
+        Raises
+        ------
+        ValueError
+            If this camera has ``size=None``, or ``width`` or ``height`` is not a positive
+            integer.
         """
         if self.size is None:
             raise ValueError("scaled() needs the calibration's size; this camera has size=None")
@@ -321,9 +373,22 @@ class Camera:
     def normalize(self, points: ArrayLike) -> FloatArray:
         """Normalized image coordinates ``(x/z, y/z)`` of (N, 2) pixel points (distortion removed).
 
+        Parameters
+        ----------
+        points : array_like (N, 2) or (2,)
+            Pixel coordinates ``(x, y)``, px, pixel centres at integers, in the distorted
+            image.
+
         Returns
         -------
         ndarray (N, 2) float64
+            ``(x/z, y/z)`` of the rays through the points, camera frame (dimensionless); a
+            single point gives (1, 2).
+
+        Raises
+        ------
+        ValueError
+            If ``points`` is not (N, 2) or (2,).
         """
         p = _as_points(points, 2, "points")
         if not self.has_distortion:
@@ -343,9 +408,21 @@ class Camera:
 
         The identity when there is no distortion.
 
+        Parameters
+        ----------
+        points : array_like (N, 2) or (2,)
+            As for :meth:`normalize`: pixels of the distorted image.
+
         Returns
         -------
         ndarray (N, 2) float64
+            The undistorted pixel coordinates, px (a copy of ``points`` without distortion); a
+            single point gives (1, 2).
+
+        Raises
+        ------
+        ValueError
+            If ``points`` has neither shape.
         """
         p = _as_points(points, 2, "points")
         if not self.has_distortion:
@@ -357,9 +434,22 @@ class Camera:
 
         Points must lie in front of the camera (``z > 0``); others give meaningless pixels.
 
+        Parameters
+        ----------
+        points_cam : array_like (N, 3) or (3,)
+            Points ``(x, y, z)`` in the camera frame (x right, y down, z forward), m (any
+            unit: only the ratios count).
+
         Returns
         -------
         ndarray (N, 2) float64
+            Their pixel coordinates, px, pixel centres at integers, lens distortion applied;
+            a single point gives (1, 2).
+
+        Raises
+        ------
+        ValueError
+            If ``points_cam`` is not (N, 3) or (3,).
         """
         p = _as_points(points_cam, 3, "points_cam")
         if not self.has_distortion:
@@ -373,6 +463,48 @@ class Camera:
         return out.reshape(-1, 2).astype(np.float64, copy=False)
 
     def project_object(self, points_obj: ArrayLike, pose: Pose) -> FloatArray:
-        """Pixels of (N, 3) object points seen with ``pose`` (object frame into camera frame)."""
+        """Pixels of (N, 3) object points seen with ``pose`` (object frame into camera frame).
+
+        Parameters
+        ----------
+        points_obj : array_like (N, 3) or (3,)
+            Points in the object frame (marker, map, ...), m.
+        pose : Pose
+            ``T_cam_obj``: ``p_cam = R @ p_obj + t`` (:meth:`visloc.types.Pose.apply`).
+
+        Returns
+        -------
+        ndarray (N, 2) float64
+            Pixel coordinates, px, pixel centres at integers, lens distortion applied, as
+            :meth:`project`; a single point gives (1, 2).
+
+        Raises
+        ------
+        ValueError
+            If ``points_obj`` is not (N, 3) or (3,).
+        """
         p = _as_points(points_obj, 3, "points_obj")
         return self.project(pose.apply(p))
+
+
+def _storage_value(key: object, value: object) -> int | float | str | np.ndarray:
+    """``value`` as :meth:`Camera.to_file` writes it under ``key`` (an int, float, str or a
+    float64 array), or ``ValueError`` / ``TypeError`` naming the node."""
+    if not isinstance(key, str) or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_-]*", key):
+        raise ValueError(f"extra: {key!r} is not a FileStorage node name")
+    if isinstance(value, (bool, np.bool_)):
+        return int(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value)
+    if isinstance(value, str):
+        return value
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise TypeError(f"extra[{key!r}]: expected a number, a string or an array of numbers, "
+                        f"got {type(value).__name__}") from None
+    if arr.ndim > 2 or arr.size == 0:
+        raise TypeError(f"extra[{key!r}]: expected an array of up to 2 dimensions with values, got shape {arr.shape}")
+    return np.ascontiguousarray(arr.reshape(-1, 1) if arr.ndim < 2 else arr)

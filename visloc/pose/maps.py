@@ -26,6 +26,23 @@ __all__ = ["GridMap", "MarkerMap"]
 FloatArray = NDArray[np.float64]
 
 
+def _marker_id(value: object) -> int:
+    """A marker id as an int: a whole number (an int, or a float with no fraction); a
+    fraction raises ``ValueError`` (no id is rounded into another), a bool or a non-number
+    ``TypeError``."""
+    if isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"a marker id must be a whole number, got {value!r}")
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    try:
+        f = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise TypeError(f"a marker id must be a whole number, got {value!r}") from None
+    if not f.is_integer():
+        raise ValueError(f"a marker id must be a whole number, got {value!r}")
+    return int(f)
+
+
 def _marker_frame(corners: FloatArray) -> tuple[Pose, float]:
     """The marker's own frame in the map (origin at the centre, x right, y up, z out of the
     face) as ``T_map_marker``, and its side length; checks the corners form a square."""
@@ -54,7 +71,7 @@ class MarkerMap:
     ----------
     corners : dict of int -> array_like (4, 3)
         Each marker's corners in OpenCV order (its own top-left, top-right, bottom-right,
-        bottom-left), metres. They must form a planar square.
+        bottom-left), metres. They must form a planar square. The map keeps read-only copies.
     dictionary : str or None
         The marker dictionary the map's ids belong to (an OpenCV name such as
         ``"DICT_4X4_100"``), saved with the map; ``None``: not recorded.
@@ -62,8 +79,10 @@ class MarkerMap:
     Raises
     ------
     ValueError
-        Duplicate ids (when built from a list), corners that are not finite, not (4, 3),
-        not a square or not planar.
+        Duplicate ids (when built from a list), an id with a fraction, corners that are not
+        finite, not (4, 3), not a square or not planar.
+    TypeError
+        An id that is not a number (or is a bool).
     """
 
     corners: dict[int, FloatArray]
@@ -75,25 +94,49 @@ class MarkerMap:
             raise ValueError(f"dictionary must be a name or None, got {self.dictionary!r}")
         clean: dict[int, FloatArray] = {}
         for k, v in dict(self.corners).items():
-            arr = np.asarray(v, dtype=np.float64)
+            k = _marker_id(k)
+            arr = np.array(v, dtype=np.float64)  # a copy: the caller's array stays theirs
+            arr.setflags(write=False)
             if arr.shape != (4, 3) or not np.isfinite(arr).all():
                 raise ValueError(f"marker {k}: corners must be finite (4, 3), got shape {arr.shape}")
             try:
                 frame, _ = _marker_frame(arr)
             except ValueError as exc:
                 raise ValueError(f"marker {k}: its corners are {exc} (within 0.1 % of the side)") from None
-            clean[int(k)] = arr
-            self._frames[int(k)] = frame
+            clean[k] = arr
+            self._frames[k] = frame
         object.__setattr__(self, "corners", clean)
 
     @classmethod
     def from_list(cls, markers: list[tuple[int, ArrayLike]], dictionary: str | None = None) -> MarkerMap:
-        """A map from ``[(id, corners (4, 3)), ...]``; duplicate ids raise ValueError."""
-        ids = [int(i) for i, _ in markers]
+        """A map from ``[(id, corners (4, 3)), ...]``; duplicate ids raise ValueError.
+
+        Parameters
+        ----------
+        markers : list of (int, array_like (4, 3))
+            Each marker's id and corners in OpenCV order (its own top-left, top-right,
+            bottom-right, bottom-left), m, map frame; they must form a planar square.
+        dictionary : str or None
+            The markers' dictionary name, recorded with the map (as :class:`MarkerMap`).
+
+        Returns
+        -------
+        MarkerMap
+
+        Raises
+        ------
+        ValueError
+            Duplicate ids, or what :class:`MarkerMap` rejects: an id with a fraction, corners
+            that are not finite, not (4, 3), not a square or not planar, a ``dictionary``
+            neither None nor a non-empty str.
+        TypeError
+            An id that is not a number.
+        """
+        ids = [_marker_id(i) for i, _ in markers]
         dup = sorted({i for i in ids if ids.count(i) > 1})
         if dup:
             raise ValueError(f"duplicate marker ids in the map: {dup}")
-        return cls({int(i): c for i, c in markers}, dictionary)
+        return cls(dict(zip(ids, (c for _, c in markers), strict=True)), dictionary)
 
     @cached_property
     def stacked(self) -> tuple[NDArray[np.int64], FloatArray]:
@@ -116,15 +159,68 @@ class MarkerMap:
         return len(self.corners)
 
     def corners_of(self, marker_id: int) -> FloatArray:
-        """(4, 3) corners of ``marker_id`` in the map frame; KeyError if it is not in the map."""
+        """(4, 3) corners of ``marker_id`` in the map frame; KeyError if it is not in the map.
+
+        Parameters
+        ----------
+        marker_id : int
+            The marker's id.
+
+        Returns
+        -------
+        ndarray (4, 3) float64
+            Its corners in OpenCV order (its own top-left, top-right, bottom-right,
+            bottom-left), m, map frame; the map's stored array (read-only).
+
+        Raises
+        ------
+        KeyError
+            If ``marker_id`` is not in the map.
+        """
         return self.corners[int(marker_id)]
 
     def marker_pose(self, marker_id: int) -> Pose:
-        """``T_map_marker``: the marker's own frame (centre, x right, y up, z out) in the map."""
+        """``T_map_marker``: the marker's own frame (centre, x right, y up, z out) in the map.
+
+        Parameters
+        ----------
+        marker_id : int
+            Which marker.
+
+        Returns
+        -------
+        Pose
+            ``T_map_marker``: ``p_map = R @ p_marker + t``; ``R``'s columns are the marker's
+            axes in map coordinates (the nearest rotation to its corners' edges), ``t`` its
+            centre (the corners' mean), m, map frame.
+
+        Raises
+        ------
+        KeyError
+            If ``marker_id`` is not in the map.
+        """
         return self._frames[int(marker_id)]
 
     def to_file(self, path: str | Path) -> None:
-        """Save as OpenCV FileStorage YAML (see the module docstring)."""
+        """Save as OpenCV FileStorage YAML (see the module docstring).
+
+        Markers are written in id order, with the ``dictionary`` name when it is recorded;
+        :meth:`from_file` reads the file back.
+
+        Parameters
+        ----------
+        path : str or Path
+            The file to write (replaced if it exists; its folder must exist).
+
+        Raises
+        ------
+        ValueError
+            If the map has no markers (:meth:`from_file` refuses such a file).
+        OSError
+            If the file cannot be written; the message names it.
+        """
+        if not self.corners:
+            raise ValueError(f"cannot save an empty marker map to {path}: it has no markers")
         lines = ["%YAML:1.0"] + ([f'dictionary: "{self.dictionary}"'] if self.dictionary else []) + ["markers:"]
         for i in self.ids:
             nums = ", ".join(repr(float(v)) for v in self.corners[int(i)].ravel())
@@ -138,11 +234,24 @@ class MarkerMap:
     def from_file(cls, path: str | Path) -> MarkerMap:
         """Load a map saved by :meth:`to_file` (or written by hand in that format).
 
+        Parameters
+        ----------
+        path : str or Path
+            The map file (OpenCV FileStorage: a ``markers`` list of ``{id, corners}`` entries,
+            12 corner numbers each, m; an optional ``dictionary`` name).
+
+        Returns
+        -------
+        MarkerMap
+            The markers, corners in the map frame, m, and the recorded dictionary (None when
+            the file names none).
+
         Raises
         ------
         ValueError
-            A missing or unreadable file, no ``markers`` list, an entry without ``id`` and 12
-            corner numbers, duplicate ids, or corners that are not a planar square.
+            A missing, empty or unreadable file, no ``markers`` list or an empty one, an entry
+            without ``id`` and 12 corner numbers, an id that is not a whole number, duplicate
+            ids, or corners that are not a planar square.
         """
         p = Path(path)
         fs = open_storage(p, "marker map")
@@ -163,7 +272,11 @@ class MarkerMap:
                 vals = cn.mat() if cn.isMap() else np.array([cn.at(j).real() for j in range(cn.size())])
                 if vals is None or np.size(vals) != 12:
                     raise ValueError(f"marker map {p}: entry {k} must have 12 corner numbers")
-                items.append((int(mid.real()), np.asarray(vals, float).reshape(4, 3)))
+                try:
+                    marker_id = _marker_id(mid.real())
+                except ValueError as exc:
+                    raise ValueError(f"marker map {p}: entry {k}: {exc}") from None
+                items.append((marker_id, np.asarray(vals, float).reshape(4, 3)))
         finally:
             fs.release()
         return cls.from_list(items, dictionary)

@@ -47,7 +47,14 @@ class TruthEstimator:
         self.state = np.zeros(12)
 
     def observe(self, state: FloatArray) -> None:
-        """Take the true ``state`` (12,)."""
+        """Take the true state as the estimate.
+
+        Parameters
+        ----------
+        state : ndarray (12,)
+            The vehicle's state in the model's order (:data:`visloc.model.STATE_NAMES`: position
+            m and velocity m/s in A (NED), roll, pitch, yaw rad, body rates rad/s); copied.
+        """
         self.state = state.copy()
 
 
@@ -128,7 +135,26 @@ class VisionEstimator:
         return np.concatenate([self.kf.position, self.kf.velocity, self.lam, self.omega])
 
     def imu(self, t: float, gyro: FloatArray, accel: FloatArray) -> None:
-        """Propagate to time ``t`` with one IMU sample (body rates rad/s, specific force m/s^2)."""
+        """Propagate to time ``t`` with one IMU sample.
+
+        The attitude integrates the gyro (report eq. 2.3), the body rates become the gyro's, and
+        the Kalman filter predicts with the specific force rotated into A plus gravity.
+
+        Parameters
+        ----------
+        t : float
+            Time of the sample, s (not earlier than the previous one).
+        gyro : ndarray (3,)
+            Body rates, rad/s, body axes.
+        accel : ndarray (3,)
+            Specific force, m/s^2, body axes (level at rest: ``(0, 0, -g)``).
+
+        Raises
+        ------
+        ValueError
+            ``t`` earlier than the filter's last time, or a sample of the wrong shape
+            (:meth:`visloc.estimation.fusion.MapFixFusion.predict`).
+        """
         dt = t - self._t
         self._t = t
         if dt > 0.0:
@@ -146,12 +172,21 @@ class VisionEstimator:
         return None if fix is None else (fix.pose, fix.position_covariance)
 
     def ultrasound(self, t: float, reading: float, std: float = 0.01) -> bool:
-        """Correct the height with one ultrasound reading taken at ``t`` (report §3.2.1).
+        """Correct the height with one ultrasound reading (report §3.2.1).
 
         The reading becomes a distance along the beam by report eq. (3.13)
         (:func:`visloc.estimation.ultrasound_height`), a height by the estimated tilt, and an
         update of the filter's ``z`` alone (``H`` picks it from the state). Readings in a blind
         zone, and those more than 3 sigma from the prediction, are skipped.
+
+        Parameters
+        ----------
+        t : float
+            Time of the reading, s (the filter is predicted to it first).
+        reading : float
+            The sensor's reading, its own units (:func:`visloc.estimation.ultrasound_height`).
+        std : float
+            Standard deviation of the height it gives, m.
 
         Returns
         -------
@@ -175,7 +210,17 @@ class VisionEstimator:
         return True
 
     def image(self, t: float, image: NDArray[np.uint8], dt: float) -> bool:
-        """Correct with one bottom-camera image taken at ``t``, ``dt`` after the previous one.
+        """Correct with one bottom-camera image: its map fix corrects the position (Kalman
+        update, gated) and pulls the attitude towards the fix's (report eq. 3.4).
+
+        Parameters
+        ----------
+        t : float
+            Time the image was taken, s.
+        image : ndarray (H, W) uint8
+            The bottom camera's grey frame.
+        dt : float
+            Seconds since the previous image (sets the attitude filter's pull, ``1 - exp(-c dt)``).
 
         Returns
         -------

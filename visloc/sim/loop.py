@@ -460,8 +460,29 @@ class VisionSensors:
 
     def sense(self, t: float, vehicle: Vehicle, force: FloatArray | None, estimator: VisionEstimator,
               g: float) -> tuple[SimStatus, str] | None:
-        """Feed the estimator what the sensors read at ``t``; why the run must stop, or None
-        (the view left the printed floor, or no fix for :data:`VISION_TIMEOUT` s)."""
+        """Feed the estimator what the sensors read at time ``t``: an IMU sample every call,
+        an ultrasound reading every :data:`ULTRASOUND_PERIOD` s, a camera frame every
+        ``cam_dt`` s.
+
+        Parameters
+        ----------
+        t : float
+            Simulated time, s.
+        vehicle : Vehicle
+            The vehicle, at time ``t`` (its state and motor inputs are read, not changed).
+        force : ndarray (3,) or None
+            External force on the CoG now, N, in A (it shows in the accelerometer).
+        estimator : VisionEstimator
+            Receives the samples.
+        g : float
+            Gravity, m/s^2.
+
+        Returns
+        -------
+        (SimStatus, str) or None
+            Why the run must stop (the view left the printed floor, or no fix for
+            :data:`VISION_TIMEOUT` s), or None.
+        """
         s, R = vehicle.state, vehicle.rotation()
         gyro, accel = self.imu.sample(s, R, vehicle.acceleration(force), g)
         estimator.imu(t, gyro, accel)

@@ -63,7 +63,20 @@ class Scenario:
         return np.array([0.0, 0.0, -HOVER_HEIGHT, 0.0])
 
     def setpoint(self, t: float) -> FloatArray:
-        """``[x, y, z, psi]`` at time ``t``."""
+        """The set point at time ``t``.
+
+        Parameters
+        ----------
+        t : float
+            Time since the start, s.
+
+        Returns
+        -------
+        ndarray (4,)
+            ``[x, y, z, psi]``: position in A (NED, m, z down) and heading (rad): the
+            trajectory's position when there is one, else the step's target from its time on,
+            else :attr:`start_setpoint`.
+        """
         if self.trajectory is not None:
             return np.r_[self.trajectory.sample(t)[0], self.start_setpoint[3]]
         if self.step is not None and t >= self.step[0]:
@@ -71,14 +84,38 @@ class Scenario:
         return self.start_setpoint
 
     def reference(self, t: float) -> tuple[FloatArray, FloatArray] | None:
-        """The trajectory's velocity and acceleration at ``t`` (A frame), or None without one."""
+        """The trajectory's velocity and acceleration at time ``t``.
+
+        Parameters
+        ----------
+        t : float
+            Simulated time, s (0 at the start).
+
+        Returns
+        -------
+        (ndarray (3,), ndarray (3,)) or None
+            Velocity (m/s) and acceleration (m/s^2) in A (NED), for the controller's feed-forward
+            (:meth:`visloc.control.Controller.command`); None without a trajectory.
+        """
         if self.trajectory is None:
             return None
         _, v, a, _ = self.trajectory.sample(t)
         return v, a
 
     def force(self, t: float) -> FloatArray | None:
-        """The push force on the CoG at ``t`` (N, A frame), or None."""
+        """The push on the centre of gravity at time ``t``.
+
+        Parameters
+        ----------
+        t : float
+            Seconds since the start.
+
+        Returns
+        -------
+        ndarray (3,) or None
+            The push's force, N, in A (NED), while ``push`` lasts (from its start, for its
+            duration); None at other times and without a push.
+        """
         if self.push is not None and self.push[0] <= t < self.push[0] + self.push[1]:
             return self.push[2]
         return None

@@ -58,10 +58,28 @@ class Imu:
 
     def sample(self, state: FloatArray, R: FloatArray, acceleration: FloatArray, g: float
                ) -> tuple[FloatArray, FloatArray]:
-        """One sample ``(gyro, accel)`` (3,), (3,) of a body in ``state``.
+        """One sample of a body in ``state``.
 
         ``gyro = omega + bias + noise`` and the specific force ``accel = R^T (nu' - g e3) +
         noise`` (level at rest: ``(0, 0, -g)``, the convention of :mod:`visloc.estimation`).
+
+        Parameters
+        ----------
+        state : ndarray (12,)
+            The body's state (:data:`visloc.model.STATE_NAMES`); its body rates (rad/s) are read.
+        R : ndarray (3, 3)
+            Attitude, body to A (NED).
+        acceleration : ndarray (3,)
+            Inertial acceleration ``nu'``, m/s^2, in A (:meth:`visloc.sim.Vehicle.acceleration`).
+        g : float
+            Gravity, m/s^2.
+
+        Returns
+        -------
+        gyro : ndarray (3,)
+            Body rates, rad/s, body axes.
+        accel : ndarray (3,)
+            Specific force, m/s^2, body axes.
         """
         gyro = state[9:12] + self.gyro_bias + self.rng.normal(0.0, self.gyro_noise, 3)
         f = R.T @ (acceleration - np.array([0.0, 0.0, g]))
@@ -76,7 +94,21 @@ class Ultrasound:
         self.rng = rng if rng is not None else np.random.default_rng()
 
     def sample(self, state: FloatArray, R: FloatArray) -> float:
-        """Reading (sensor units) for the distance along body z to the floor ``z = 0``."""
+        """The reading for the distance along body z to the floor ``z = 0`` (report eq. 3.12).
+
+        Parameters
+        ----------
+        state : ndarray (12,)
+            The body's state; its height ``-z`` (m, A is NED) is read.
+        R : ndarray (3, 3)
+            Attitude, body to A: the beam's tilt lengthens the distance by ``1 / R[2, 2]``.
+
+        Returns
+        -------
+        float
+            The reading, sensor units (:func:`visloc.estimation.height.ultrasound_reading`),
+            with the noise added; 0 where the sensor reads nothing (its blind zone).
+        """
         cos_tilt = max(float(R[2, 2]), 1e-3)
         reading = float(ultrasound_reading(max(-state[2] / cos_tilt, 0.0)))
         return reading + float(self.rng.normal(0.0, self.noise)) if reading > 0 else 0.0
@@ -133,13 +165,46 @@ class BottomCamera:
         self.centre[2] = 0.0
 
     def pose(self, state: FloatArray, R: FloatArray) -> Pose:
-        """``T_cam_map`` of a body in ``state`` with attitude ``R`` (body to A)."""
+        """The camera's pose over the map for a body in ``state`` (module docstring's frames).
+
+        Parameters
+        ----------
+        state : ndarray (12,)
+            The body's state; its position (m, A) is read.
+        R : ndarray (3, 3)
+            Attitude, body to A.
+
+        Returns
+        -------
+        Pose
+            ``T_cam_map``: ``p_cam = R @ p_map + t``, m.
+        """
         R_map_cam = MAP_FROM_NED @ R @ BODY_TO_CAMERA.T
         position = self.centre + MAP_FROM_NED @ state[:3]
         return Pose(R_map_cam.T, -R_map_cam.T @ position)
 
     def capture(self, state: FloatArray, R: FloatArray) -> NDArray[np.uint8]:
-        """The image seen from ``state`` (raises ``ValueError`` if the view leaves the floor)."""
+        """The grey image the camera sees from ``state``: the floor texture's view
+        (:meth:`visloc.synth.FloorTexture.render`) with the sensor noise added.
+
+        Parameters
+        ----------
+        state : ndarray (12,)
+            The body's state (position m, A).
+        R : ndarray (3, 3)
+            Attitude, body to A.
+
+        Returns
+        -------
+        ndarray (height, width) uint8
+            The frame, ``size`` as given to the camera.
+
+        Raises
+        ------
+        ValueError
+            If the view leaves the printed floor (its texture and margin), or the camera is not
+            above the floor.
+        """
         image = self.floor.render(self.K, self.size, self.pose(state, R), supersample=self.supersample)
         if self.noise_sigma <= 0.0:
             return image
@@ -150,7 +215,20 @@ class BottomCamera:
         return cv2.add(image, self._grain[y : y + h, x : x + w], dtype=cv2.CV_8U)  # clipped to 0-255
 
     def body_from_map(self, T_cam_map: Pose) -> tuple[FloatArray, FloatArray]:
-        """Inverse of :meth:`pose`: ``(position in A (3,), R body to A (3, 3))``."""
+        """The body's position and attitude from a camera pose: the inverse of :meth:`pose`.
+
+        Parameters
+        ----------
+        T_cam_map : Pose
+            ``p_cam = R @ p_map + t``, m (e.g. a map fix).
+
+        Returns
+        -------
+        position : ndarray (3,)
+            The body's position (its CoG, where the camera sits), m, in A (NED).
+        R : ndarray (3, 3)
+            Attitude, body to A.
+        """
         R_map_cam = T_cam_map.R.T
         position = MAP_FROM_NED @ (-R_map_cam @ T_cam_map.t - self.centre)
         return position, MAP_FROM_NED @ R_map_cam @ BODY_TO_CAMERA

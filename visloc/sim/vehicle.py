@@ -134,12 +134,36 @@ class Vehicle:
         return self.gamma @ self._bar  # report eq. (2.11)
 
     def trim(self, pwm: ArrayLike) -> None:
-        """Set the motors to ``pwm`` at once (no lag), e.g. hover trim before the start."""
+        """Set the motors to ``pwm`` at once (no lag), e.g. hover trim before the start.
+
+        Parameters
+        ----------
+        pwm : array_like (4,)
+            Commands of motors 1-4, percent (clipped to ``[0, pwm_max]``).
+
+        Raises
+        ------
+        TypeError
+            ``pwm`` not numbers.
+        ValueError
+            ``pwm`` not four finite numbers.
+        """
         self.pwm = np.clip(as_array(pwm, "pwm", (4,)), 0.0, self.pwm_max)
         self._bar = pwm_bar(self.pwm, self.params.k)
 
     def acceleration(self, force: FloatArray | None = None) -> FloatArray:
-        """Inertial acceleration ``nu'`` (3,) now, m/s^2 (for the accelerometer)."""
+        """The inertial acceleration now (for the accelerometer), report eq. (2.2).
+
+        Parameters
+        ----------
+        force : ndarray (3,), optional
+            External force on the CoG, N, in A.
+
+        Returns
+        -------
+        ndarray (3,)
+            ``nu'``, m/s^2, in A (NED).
+        """
         return self._f(self.state, self.inputs, force)[3:6]
 
     def _f(self, s: FloatArray, u: FloatArray, force: FloatArray | None) -> FloatArray:

@@ -95,7 +95,26 @@ class FlightTrack:
         return _rotations(self.yaw, self.roll, self.pitch)
 
     def pose(self, k: int) -> tuple[FloatArray, FloatArray]:
-        """``(R_world_cam, C)`` of frame ``k``, as :func:`render_ground_view` takes it."""
+        """``(R_world_cam, C)`` of frame ``k``, as :func:`render_ground_view` takes it.
+
+        Parameters
+        ----------
+        k : int
+            Frame index; negative counts from the end, as for a sequence.
+
+        Returns
+        -------
+        R_world_cam : ndarray (3, 3)
+            Camera axes in world coordinates (columns), from the frame's yaw, roll and pitch
+            (module docstring).
+        C : ndarray (3,)
+            Camera centre ``(X, Y, h)``, m, world frame (a copy of ``position[k]``).
+
+        Raises
+        ------
+        IndexError
+            If ``k`` is not in ``[-len(self), len(self) - 1]``.
+        """
         k = range(len(self.t))[k]
         sl = slice(k, k + 1)
         return _rotations(self.yaw[sl], self.roll[sl], self.pitch[sl])[0], self.position[k].copy()

@@ -17,7 +17,8 @@ inside) in the map's (or the simulator's inertial) axes:
   it, :class:`PositionVelocityKF`).
 
 The noise model in numbers (defaults): fixes at least 2 mm (``min_fix_std``), 5 mm without a
-covariance (``fix_std``); without accelerometer, white acceleration of 2 m/s^2 (``accel_noise``).
+covariance (``fix_std``); without accelerometer, an acceleration of 2 m/s^2 standard deviation
+per step, independent from step to step (``accel_noise``).
 """
 
 from __future__ import annotations
@@ -41,8 +42,9 @@ class MapFixFusion:
     Parameters
     ----------
     accel_noise : float
-        White-acceleration density of the CV model when a step has no accelerometer input,
-        m/s^2 (``PositionVelocityKF``'s ``accel_noise``).
+        Standard deviation of the acceleration held constant over each step of the CV model
+        when the step has no accelerometer input, m/s^2 per step (``PositionVelocityKF``'s
+        ``accel_noise`` with its default ``accel_noise_kind="std"``).
     min_fix_std : float
         Floor on a fix's standard deviation, m.
     fix_std : float

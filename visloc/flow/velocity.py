@@ -276,6 +276,7 @@ class EgoMotion:
     _last: tuple[GlobalMotion, float] | None = field(default=None, init=False, repr=False)  # motion, dt
     _blurred: NDArray[np.float32] | None = field(default=None, init=False, repr=False)  # the last frame's
     _anchor: tuple[float, float, int] | None = field(default=None, init=False, repr=False)  # spread, quality, age
+    _sized: Camera | None = field(default=None, init=False, repr=False)  # the camera at the frames' size
 
     def __post_init__(self) -> None:
         for name in ("height", "fps"):
@@ -400,9 +401,18 @@ class EgoMotion:
             return None, True
         self._anchor = (anchor, quality, age + 1)
         motion = replace(found, method=method + "+tracked")
-        h, w = frames[0].shape  # no FlowField here: the frames' own size, as on the block-sum path
-        gv = ground_velocity(motion, replace(self.camera, size=(w, h)), height, dt, gyro=gyro)
+        gv = ground_velocity(motion, self._camera_at(frames[0].shape), height, dt, gyro=gyro)
         return replace(gv, quality=quality * min(1.0, anchor / spread), reason=""), False
+
+    def _camera_at(self, shape: tuple[int, ...]) -> Camera:
+        """The camera with the frames' own size ``(H, W)`` (no FlowField on the tracked path:
+        the size the block-sum path takes from it), made once per size."""
+        size = (shape[1], shape[0])
+        if self.camera.size == size:
+            return self.camera
+        if self._sized is None or self._sized.size != size:
+            self._sized = replace(self.camera, size=size)
+        return self._sized
 
     @property
     def frame_shape(self) -> tuple[int, ...] | None:

@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from visloc.boards import CharucoBoard, calibrate, detect_charuco
+from visloc.boards import CharucoBoard, CharucoCorners, calibrate, detect_charuco
 from visloc.cli import main
 from visloc.pose import Camera
 
@@ -146,3 +146,15 @@ def test_fisheye_model_recovers_a_wide_angle_camera(tmp_path):
     expected = cv2.fisheye.projectPoints(p.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), cal.K, cal.dist)[0]
     assert np.allclose(cam.project(p), expected.reshape(-1, 2))
     assert np.allclose(cam.normalize(cam.project(p)), p[:, :2] / p[:, 2:], atol=1e-9)
+
+
+def test_corner_ids_off_the_board_are_named():
+    n = len(BOARD.chessboard_corners)  # 40
+    good = CharucoCorners(np.arange(10), np.random.default_rng(0).uniform(0, 600, (10, 2)))
+    for bad, shown in ((np.arange(100, 110), r"\[100, 101, .*109\]"), (np.r_[-1, 1:10], r"\[-1\]"),
+                       (np.arange(n - 5, n + 5), rf"\[{n}, .*{n + 4}\]")):
+        views = [good, good, CharucoCorners(bad, good.corners), good]
+        with pytest.raises(ValueError, match=rf"views\[2\]: corner ids {shown} are not .*\[0, {n}\)"):
+            calibrate(views, BOARD, (800, 600))
+    with pytest.raises(TypeError, match=r"views\[1\]: corner ids must be integers, got float64"):
+        calibrate([good, CharucoCorners(np.arange(10.0), good.corners), good], BOARD, (800, 600))

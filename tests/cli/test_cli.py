@@ -80,9 +80,16 @@ def test_corrupt_image_is_reported_and_the_run_goes_on(rendered, tmp_path, capsy
     assert len(records) == 3
     assert [r["frame"] for r in records] == [0, 1, 2]  # sorted: frame_0000, frame_0001, frame_0001b
     assert "error" in records[2] and "frame_0001b.png" in records[2]["source"]
+    assert all("time" in r for r in records)  # an unreadable frame keeps its time, as localize's rows do
     assert all(r["markers"] for r in records[:2])
     err = capsys.readouterr().err
     assert err.count("warning") == 1 and "frame_0001b.png" in err
+
+
+def test_max_frames_counts_the_frames_processed_not_those_skipped_before_the_range(rendered, tmp_path):
+    out = tmp_path / "range.jsonl"
+    assert main(["detect", str(rendered), "--frame-range", "1:", "--max-frames", "2", "--out", str(out), "--quiet"]) == 0
+    assert [r["frame"] for r in _lines(out)] == [1, 2]
 
 
 def test_detect_video(tmp_path):

@@ -156,3 +156,25 @@ def test_compressed_images_are_read_in_place_as_rosbags_reads_them(flight, ros2)
             assert _compressed_payload(raw + b"\0", ros2) is None
             if ros2:  # big-endian CDR: left to rosbags too
                 assert _compressed_payload(bytes(store.serialize_cdr(msg, typ, little_endian=False)), ros2) is None
+
+
+def test_a_frame_stamped_before_the_last_is_recorded_and_the_run_goes_on(flight, tmp_path):
+    _, src, frames, _ = flight
+    store = get_typestore(Stores.ROS1_NOETIC)
+    stamps = [k / FPS for k in range(len(frames))]
+    stamps[3] = stamps[1]  # the camera's clock jumped back on frame 3; the recorder's log time did not
+    bag = tmp_path / "back.bag"
+    with Ros1Writer(bag) as w:
+        conn = w.add_connection("/camera/image", "sensor_msgs/msg/Image", typestore=store)
+        for k, (img, t) in enumerate(zip(frames, stamps, strict=True)):
+            msg = _image_message(store, img, _header(store, T0 * 10**9 + round(t * 1e9), True, "camera"), "mono8")
+            w.write(conn, T0 * 10**9 + round(k / FPS * 1e9), store.serialize_ros1(msg, "sensor_msgs/msg/Image"))
+    cam = ["--camera", str(src / "camera.yml"), "--quiet"]
+    assert main(["localize", str(bag), "--map", str(src / "map.yml"), "--out", str(tmp_path / "l.csv"), *cam]) == 1
+    rows = list(csv.DictReader((tmp_path / "l.csv").open()))
+    assert len(rows) == len(frames) and rows[3]["fix"] == "time went back"
+    assert rows[2]["fix"] == rows[4]["fix"] == "used"  # the frames around it localised as usual
+    assert main(["flow", str(bag), "--height", "1.0", "--out", str(tmp_path / "f.csv"), *cam]) == 1
+    rows = list(csv.DictReader((tmp_path / "f.csv").open()))
+    assert len(rows) == len(frames) and "not after the previous frame's" in rows[3]["reason"]
+    assert float(rows[4]["quality"]) > 0  # the next pair spans frames 2 and 4

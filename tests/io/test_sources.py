@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import cv2
@@ -276,3 +277,15 @@ def test_a_video_with_corrupt_bytes_is_read_past_them_and_says_so(tmp_path: Path
     cut = list(open_source(truncated))
     assert 0 < len(cut) - 1 < 100 and cut[-1].image is None
     assert "of 100 the container declares" in cut[-1].error and "ends early" in cut[-1].error
+
+
+def test_frame_times_go_on_from_the_last_stamp_when_the_stamps_stop_being_usable() -> None:
+    from visloc.io.sources import _FrameClock
+
+    clock = _FrameClock(30.0, stamps=True)  # a stream starting at 10 s whose stamps repeat at frame 2
+    times = [clock.time(k, s) for k, s in enumerate([10.0, 10.0 + 1 / 30, 10.0 + 1 / 30, 10.1, 10.0 + 4 / 30])]
+    assert times == pytest.approx([10.0, 10.0 + 1 / 30, 10.0 + 2 / 30, 10.1, 10.0 + 4 / 30])
+    none = _FrameClock(25.0, stamps=True)  # no usable stamp at all: index / rate from the start
+    assert [none.time(k, math.nan) for k in range(3)] == pytest.approx([0.0, 0.04, 0.08])
+    given = _FrameClock(10.0, stamps=False)  # --fps given: index / fps whatever the stamps
+    assert [given.time(k, 5.0 + k) for k in range(3)] == pytest.approx([0.0, 0.1, 0.2])

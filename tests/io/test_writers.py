@@ -145,3 +145,12 @@ def test_an_earlier_result_survives_a_run_that_fails_before_its_first_record(tmp
     csv_path.write_text("frame\n1\n")
     CsvWriter(csv_path, ["frame"]).close()
     assert csv_path.read_text() == "frame\n1\n"
+
+
+def test_keys_with_one_json_form_and_a_video_target_that_is_a_folder_are_refused(tmp_path: Path) -> None:
+    with pytest.raises(TypeError, match=r"obj\['a'\]: the keys 1 and '1' both become '1'"):
+        to_jsonable({"a": {1: 2, "1": 3}})
+    assert to_jsonable({1: 2, "2": 3}) == {"1": 2, "2": 3}
+    (tmp_path / "ann.mp4").mkdir()
+    with pytest.raises(ValueError, match="is a folder"):
+        AnnotationSink(tmp_path / "ann.mp4")

@@ -5,9 +5,11 @@ from hypothesis import strategies as st
 
 from visloc.markers.bits import (
     CellSample,
+    cell_white_fractions,
     decode,
     otsu_threshold,
     read_bits,
+    read_cells,
     sample_cells,
     square_to_quad,
 )
@@ -133,3 +135,99 @@ def test_compiled_sampling_maps_are_the_numpy_maps():
     for n, per_side in ((6, 4), (10, 32)):  # 102400 points a marker: OpenCV's maps in pieces
         a, b = (cell_white_fractions(image, quads[2:6], n, thr[2:6], per_side=per_side, native=e) for e in (True, False))
         assert a.shape == (4, n, n) and np.array_equal(a, b)
+
+
+def _quad(x0=10.0, x1=50.0):
+    return np.array([[x0, x0], [x1, x0], [x1, x1], [x0, x1]])
+
+
+def test_square_to_quad_takes_one_quad_and_refuses_other_shapes(rng):
+    quads = rng.uniform(0, 100, (3, 4, 2))
+    assert np.array_equal(square_to_quad(quads[1]), square_to_quad(quads)[1])
+    assert square_to_quad(quads[1]).shape == (3, 3)
+    with pytest.raises(ValueError, match=r"quads must be \(K, 4, 2\) or \(4, 2\), got shape \(3, 2\)"):
+        square_to_quad(np.zeros((3, 2)))
+
+
+def test_decode_refuses_values_other_than_0_and_1():
+    d = load_dictionary("DICT_4X4_50")
+    with pytest.raises(ValueError, match="bits must hold only 0 and 1, got 3"):
+        decode(np.full((2, 4, 4), 3, np.uint8), d)
+    with pytest.raises(ValueError, match="bits must hold only 0 and 1, got -1"):
+        decode(-np.ones((1, 4, 4), np.int64), d)
+    with pytest.raises(ValueError, match="bits must hold only 0 and 1, got 0.5"):
+        decode(np.full((1, 4, 4), 0.5), d)
+    grids = np.rot90(d.bits[[3, 9]], 1, axes=(1, 2))
+    want = decode(grids, d)
+    for other in (grids.astype(bool), grids.astype(np.int64), grids.astype(np.float64)):
+        for a, b in zip(decode(other, d), want, strict=True):
+            assert np.array_equal(a, b) and a.dtype == b.dtype
+
+
+def test_decode_of_no_candidates_is_empty():
+    d = load_dictionary("DICT_4X4_50")
+    ids, shift, hamming, ok = decode(np.zeros((0, 4, 4), np.uint8), d)
+    for a, dtype in ((ids, np.intp), (shift, np.intp), (hamming, np.intp), (ok, np.bool_)):
+        assert a.shape == (0,) and a.dtype == dtype
+    with pytest.raises(ValueError, match=r"bits must be \(K, 4, 4\)"):
+        decode(np.zeros((0, 5, 5), np.uint8), d)
+
+
+@pytest.mark.filterwarnings("ignore:(invalid value|overflow) encountered in accumulate:RuntimeWarning")
+def test_otsu_threshold_refuses_fewer_than_two_or_non_finite_values():
+    with pytest.raises(ValueError, match=r"values must be .* m >= 2, got shape \(1, 1\)"):
+        otsu_threshold(np.array([[5.0]]))
+    for bad in ([1, np.nan, 3], [[1, 2, 3], [4, -np.inf, 6]], [np.inf, 1.0], [np.inf, -np.inf], [1e308, 1e308]):
+        with pytest.raises(ValueError, match="values must be finite"):
+            otsu_threshold(bad)
+    thr, dark, bright = otsu_threshold(np.zeros((0, 5)))  # no rows: no splits
+    assert thr.shape == dark.shape == bright.shape == (0,)
+
+
+@pytest.mark.parametrize("native", _engines())
+def test_cell_reads_refuse_a_border_that_leaves_no_bits(native):
+    gray = np.full((60, 60), 128, np.uint8)
+    with pytest.raises(ValueError, match="border must be >= 1, got 0"):
+        read_cells(gray, _quad(), 6, border=0, native=native)
+    with pytest.raises(ValueError, match=r"n must be more than 2 border \(4\), got 4"):
+        read_cells(gray, _quad(), 4, border=2, native=native)
+    sample = sample_cells(gray, _quad(), 6)
+    with pytest.raises(ValueError, match="border must be >= 1, got 0"):
+        read_bits(sample, border=0)
+
+
+@pytest.mark.parametrize("native", _engines())
+def test_cell_sampling_refuses_bad_counts_and_images(native):
+    gray, quad = np.full((60, 60), 128, np.uint8), _quad()
+    for read in (lambda **kw: sample_cells(gray, quad, native=native, **kw),
+                 lambda **kw: cell_white_fractions(gray, quad, threshold=[100.0], native=native, **kw)):
+        with pytest.raises(ValueError, match="n must be >= 1, got 0"):
+            read(n=0)
+        with pytest.raises(TypeError, match="n must be an integer, got float"):
+            read(n=6.5)
+        with pytest.raises(ValueError, match="per_side must be >= 1, got 0"):
+            read(n=6, per_side=0)
+    for image, error, message in ((np.zeros((0, 0), np.uint8), ValueError, r"non-empty \(H, W\).*\(0, 0\)"),
+                                  (np.zeros((60, 60, 3), np.uint8), ValueError, r"\(H, W\).*\(60, 60, 3\)"),
+                                  (np.zeros((60, 60)), TypeError, "gray must be a uint8 array, got float64")):
+        with pytest.raises(error, match="gray"):
+            sample_cells(image, quad, 6, native=native)
+        with pytest.raises(error, match=message):
+            cell_white_fractions(image, quad, 6, [100.0], native=native)
+    with pytest.raises(ValueError, match=r"quads must be \(K, 4, 2\) or \(4, 2\), got shape \(3, 2\)"):
+        sample_cells(gray, quad[:3], 6, native=native)
+
+
+@pytest.mark.parametrize("native", _engines())
+def test_cell_white_fractions_checks_corners_and_thresholds(native):
+    gray = np.full((60, 60), 128, np.uint8)
+    bad = _quad()
+    bad[2, 1] = np.nan
+    with pytest.raises(ValueError, match="finite"):
+        cell_white_fractions(gray, bad, 6, [100.0], native=native)
+    quads = np.stack([_quad(), _quad(5.0, 40.0), _quad(20.0, 55.0)])
+    with pytest.raises(ValueError, match=r"threshold must hold one value per quad \(3\), got shape \(2,\)"):
+        cell_white_fractions(gray, quads, 6, [100.0, 120.0], native=native)
+    white = cell_white_fractions(gray, quads, 6, [100.0, 120.0, 200.0], native=native)
+    assert np.array_equal(white, np.repeat([1.0, 1.0, 0.0], 36).reshape(3, 6, 6))
+    assert cell_white_fractions(gray, np.zeros((0, 4, 2)), 6, [], native=native).shape == (0, 6, 6)

@@ -183,3 +183,54 @@ def test_redetect_every_frame_stays_the_detector_when_told_what_to_expect(flight
     for k, img in enumerate(frames[:4]):
         tracker.detect(img, expected=markers_in_view(cam.marker_map, lens, cam.pose(*poses[max(k - 1, 0)])))
     assert tracker.full_detections == 4
+
+
+def test_expected_must_map_whole_ids_and_keep_may_be_a_numpy_number():
+    detector = MarkerDetector("DICT_4X4_50")
+    tracker = MarkerTracker(detector)
+    img = np.full((60, 80), 255, np.uint8)
+    quad = np.array([[10.0, 10], [30, 10], [30, 30], [10, 30]])
+    with pytest.raises(TypeError, match="expected must be a mapping of id to corners, got list"):
+        tracker.detect(img, expected=[quad])
+    with pytest.raises(TypeError, match="expected: marker ids must be whole numbers, got 'a'"):
+        tracker.detect(img, expected={1: quad, "a": quad})
+    with pytest.raises(TypeError, match="expected: marker ids must be whole numbers, got None"):
+        tracker.detect(img, expected={None: quad})
+    with pytest.raises(ValueError, match=r"expected: marker ids must be whole numbers, got 2\.7"):
+        tracker.detect(img, expected={1: quad, 2.7: quad})
+    with pytest.raises(ValueError, match="expected: marker ids must be whole numbers, got nan"):
+        tracker.detect(img, expected={float("nan"): quad})
+    assert tracker.frames == 0  # refused before the frame counts
+    assert tracker.detect(img, expected={2.0: quad}) == [] and tracker.frames == 1
+    assert MarkerTracker(detector, keep=np.float32(0.5)).keep == 0.5
+    for keep in (True, np.nan, "0.5", np.float32(1.5)):
+        with pytest.raises(ValueError, match="keep"):
+            MarkerTracker(detector, keep=keep)
+
+
+def test_editing_returned_corners_does_not_move_the_next_prediction(flight):
+    cam, frames = flight
+    clean = MarkerTracker(MarkerDetector(cam.dictionary, response="linear"), redetect_every=100)
+    edited = MarkerTracker(MarkerDetector(cam.dictionary, response="linear"), redetect_every=100)
+    for img in frames[:2]:
+        clean.detect(img)
+        for d in edited.detect(img):
+            d.corners[:] += 30.0  # the caller's own use of the corners, in place
+    a, b = clean.detect(frames[2]), edited.detect(frames[2])
+    assert [d.id for d in a] == [d.id for d in b]
+    assert all(np.array_equal(x.corners, y.corners) for x, y in zip(a, b, strict=True))
+    assert clean.full_detections == edited.full_detections
+
+
+def test_whole_float_and_numpy_ids_are_expected_as_ints(flight):
+    cam, frames, poses = flight + (_poses(),)
+    lens = Camera(cam.K, size=cam.size)
+    plain = MarkerTracker(MarkerDetector(cam.dictionary, response="linear"))
+    other = MarkerTracker(MarkerDetector(cam.dictionary, response="linear"))
+    plain.detect(frames[0]), other.detect(frames[0])
+    for k in (1, 2):
+        expected = markers_in_view(cam.marker_map, lens, cam.pose(*poses[k - 1]))
+        a = plain.detect(frames[k], expected=expected)
+        b = other.detect(frames[k], expected={(float(i) if i % 2 else np.int64(i)): q for i, q in expected.items()})
+        assert [(type(d.id), d.id) for d in a] == [(type(d.id), d.id) for d in b]
+        assert all(np.array_equal(x.corners, y.corners) for x, y in zip(a, b, strict=True))

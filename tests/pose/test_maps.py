@@ -264,3 +264,47 @@ def test_a_map_keeps_its_own_read_only_corners_and_whole_ids(tmp_path):
     with pytest.raises(ValueError, match="empty marker map"):
         MarkerMap({}).to_file(tmp_path / "empty.yml")
     assert not (tmp_path / "empty.yml").exists()
+
+
+def test_bad_corners_and_a_repeated_id_are_named_not_fitted():
+    g = GridMap(2, 2, 0.1, 0.05)
+    dets = _exact_view(g, np.diag([1.0, -1.0, -1.0]), np.array([0.1, -0.1, 0.8]))
+    nan = [MarkerDetection(0, np.full((4, 2), np.nan)), *dets[1:]]
+    with pytest.raises(ValueError, match=r"detections: marker 0's corners must be finite"):
+        estimate_camera_pose(nan, g, CAM)
+    short = [*dets[:1], MarkerDetection(1, dets[1].corners[:3]), *dets[2:]]
+    with pytest.raises(ValueError, match=r"detections: marker 1's corners must be \(4, 2\), got \(3, 2\)"):
+        estimate_camera_pose(short, g, CAM)
+    with pytest.raises(ValueError, match=r"detections: marker 2's corners must be \(4, 2\), got \(8,\)"):
+        estimate_camera_pose([*dets[:2], MarkerDetection(2, dets[2].corners.ravel()), dets[3]], g, CAM)
+    twice = estimate_camera_pose([*dets, MarkerDetection(3, dets[3].corners + 1.0)], g, CAM)
+    assert twice.used == [0, 1, 2] and twice.rejected == [3]  # which copy is marker 3 is unknown: neither is used
+    # a marker not in the map is ignored and listed, whatever its corners
+    mp = estimate_camera_pose([*dets, MarkerDetection(9, np.full((3, 2), np.nan))], g, CAM)
+    assert mp.unknown == [9] and mp.used == [0, 1, 2, 3] and np.isfinite(mp.pose.reprojection_rms)
+
+
+def test_markers_in_view_names_a_bad_size_or_pose_and_takes_numpy_margins():
+    g = GridMap(4, 4, 0.1, 0.05)
+    R_map_cam = Rotation.from_euler("xyz", [180, 0, 10], degrees=True).as_matrix()
+    pose = Pose(R_map_cam.T, -R_map_cam.T @ np.array([0.275, -0.275, 0.9]))
+    seen = markers_in_view(g, CAM, pose, margin=1.0)
+    assert len(seen) == 16
+    for size in ((np.int64(320), 240.0), [320, np.int32(240)]):
+        got = markers_in_view(g, CAM, pose, size=size, margin=np.float32(1))
+        assert sorted(got) == sorted(seen) and all(np.array_equal(got[i], seen[i]) for i in seen)
+    for size, kind, what in [((np.nan, 480), ValueError, "nan"), ((640,), ValueError, r"\(640,\)"),
+                             ((640, 480, 3), ValueError, "480, 3"), ((640.5, 480), ValueError, "640.5"),
+                             ((0, 480), ValueError, "0, 480"), ("ab", TypeError, "'ab'"),
+                             ((640, None), TypeError, "None"), ((True, 480), TypeError, "True"),
+                             (640, TypeError, "640")]:
+        with pytest.raises(kind, match=rf"size .*{what}"):
+            markers_in_view(g, CAM, pose, size=size)
+    bad = Pose(pose.R, np.array([0.0, np.nan, 1.0]))
+    with pytest.raises(ValueError, match="pose: .*finite"):
+        markers_in_view(g, CAM, bad)
+    with pytest.raises(ValueError, match="pose: .*finite"):
+        markers_in_view(g, CAM, Pose(np.full((3, 3), np.inf), pose.t))
+    for margin in (np.nan, True, "1"):
+        with pytest.raises(ValueError, match="margin"):
+            markers_in_view(g, CAM, pose, margin=margin)

@@ -76,3 +76,11 @@ def test_missing_maps_and_shared_ids():
     with pytest.raises(ValueError, match="share"):
         track_body([], GridMap(1, 2, 0.1, 0.0), REFERENCE, cam)
     assert isinstance(BODY, MarkerMap)
+
+
+def test_relative_pose_wants_two_poses():
+    pose = Pose(np.eye(3), np.array([0.0, 0.0, 1.0]))
+    with pytest.raises(TypeError, match="T_cam_body must be a Pose, got ndarray"):
+        relative_pose(np.eye(4), pose)
+    with pytest.raises(TypeError, match="T_cam_ref must be a Pose, got ndarray"):
+        relative_pose(pose, np.eye(4))

@@ -147,8 +147,12 @@ def calibrate(views: list[CharucoCorners], board: CharucoBoard, size: tuple[int,
 
     Raises
     ------
+    TypeError
+        A view whose corner ids are not integers.
     ValueError
-        An unknown model, a bad size, or fewer than 3 views with ``min_corners`` corners.
+        An unknown model, a bad size, a view with a corner id outside ``[0, number of the
+        board's corners)`` (the message names the view's index and the ids), or fewer than 3
+        views with ``min_corners`` corners.
     """
     if model not in CALIBRATION_MODELS:
         raise ValueError(f"model must be one of {sorted(CALIBRATION_MODELS)}, got {model!r}")
@@ -157,6 +161,15 @@ def calibrate(views: list[CharucoCorners], board: CharucoBoard, size: tuple[int,
     w, h = (int(v) for v in size)
     if w < 16 or h < 16:
         raise ValueError(f"size must be at least 16 x 16 px, got {size}")
+    n_board = len(board.chessboard_corners)
+    for i, v in enumerate(views):
+        ids = np.asarray(v.ids)
+        if ids.size and ids.dtype.kind not in "iu":
+            raise TypeError(f"views[{i}]: corner ids must be integers, got {ids.dtype}")
+        off = ids[(ids < 0) | (ids >= n_board)]
+        if off.size:
+            raise ValueError(f"views[{i}]: corner ids {off.tolist()} are not ids of the board's corners, "
+                             f"[0, {n_board})")
     used = [i for i, v in enumerate(views) if len(v) >= min_corners]
     if len(used) < 3:
         raise ValueError(f"calibration needs at least 3 views with {min_corners} or more board corners; "

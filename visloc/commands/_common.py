@@ -57,7 +57,7 @@ def finder_for(detector: MarkerDetector, args: argparse.Namespace) -> MarkerDete
 
 def frames_of(source, args: argparse.Namespace):
     """The frames of an open source with a progress bar (unless ``--quiet``), stopping after
-    ``--max-frames``; with ``--frame-range START:STOP`` only the frames whose index is in
+    ``--max-frames`` frames processed; with ``--frame-range START:STOP`` only the frames whose index is in
     ``[START, STOP)`` (the source is read from its start, so each frame keeps the index, time
     and name it has in the whole source). From the first frame on, ``args.started`` is True: the inputs were
     accepted, so an exception from here on is visloc's fault (:func:`visloc.cli.main` reports
@@ -66,19 +66,23 @@ def frames_of(source, args: argparse.Namespace):
         total = len(source)
     except TypeError:
         total = None
-    if args.max_frames:
-        total = min(total, args.max_frames) if total else args.max_frames
     start, stop = getattr(args, "frame_range", None) or (0, None)
+    if total and stop is not None:
+        total = min(total, stop)
+    if args.max_frames:  # frames read: those skipped before START, then at most --max-frames processed
+        total = min(total, start + args.max_frames) if total else start + args.max_frames
     bar = tqdm(source, total=total, unit="frame", disable=True if args.quiet else None, file=sys.stderr)
-    for n, frame in enumerate(bar):
-        if args.max_frames and n >= args.max_frames:
-            break
+    done = 0
+    for frame in bar:
         if frame.index < start:  # read, not processed: indices and times stay the whole source's
             continue
         if stop is not None and frame.index >= stop:
             break
         args.started = True
+        done += 1
         yield frame
+        if args.max_frames and done >= args.max_frames:  # stop before reading another frame
+            break
 
 def marker_records(dets: list[MarkerDetection], poses: list[Pose | None] | None) -> list[dict]:
     """JSON records of detections, with pose fields (``rvec``, ``tvec``, ``R``, Euler angles,

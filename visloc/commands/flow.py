@@ -78,6 +78,14 @@ def _read_heights(path: str) -> dict[int, float]:
 
 FLOW_COLUMNS = ["frame", "time", "source", "vx", "vy", "speed", "yaw_rate", "quality", "reason", "x", "y", "yaw"]
 
+def _skip(out, row: dict, reason: str, warning: str | None = None) -> None:
+    """Warn (``warning``, else ``reason``) and record a frame the run skips: its row with
+    quality 0 and the reason."""
+    warn("flow", warning or reason)
+    if out:
+        out.write(row | {"quality": 0.0, "reason": reason})
+
+
 def flow(args: argparse.Namespace) -> int:
     """``visloc flow``: ground velocity and integrated track of a downward camera.
 
@@ -119,19 +127,14 @@ def flow(args: argparse.Namespace) -> int:
             row = {"frame": frame.index, "time": frame.time, "source": frame.name}
             if frame.image is None:
                 failed += 1
-                warn("flow", frame.error or f"cannot read {frame.name}")
-                if out:
-                    out.write(row | {"quality": 0.0, "reason": f"unreadable: {frame.error}"})
+                _skip(out, row, f"unreadable: {frame.error}", frame.error or f"cannot read {frame.name}")
                 continue
             height = args.height
             if heights is not None:
                 height = heights.get(frame.index)
                 if height is None:  # this frame is skipped, the run goes on
                     failed += 1
-                    reason = f"--height-csv has no height for frame {frame.index}"
-                    warn("flow", reason)
-                    if out:
-                        out.write(row | {"quality": 0.0, "reason": reason})
+                    _skip(out, row, f"--height-csv has no height for frame {frame.index}")
                     continue
             cam = camera_for(camera, frame.image.shape, warned, "flow")
             if ego is None or ego.frame_shape != frame.image.shape[:2]:
@@ -146,8 +149,11 @@ def flow(args: argparse.Namespace) -> int:
                     rec.log_flow(frame.index, frame.time, frame.image, None, None, (0.0, 0.0))
                 continue
             dt = frame.time - last_time
-            if not dt > 0:
-                raise UsageError(f"frame times must increase; {frame.name} is at {frame.time} s after {last_time} s")
+            if not dt > 0:  # recorded and skipped, the run goes on from the last good frame
+                failed += 1
+                reason = f"time {frame.time} s not after the previous frame's {last_time} s"
+                _skip(out, row, reason, f"{frame.name}: {reason}; skipped")
+                continue
             gyro = mean_between(gyro_log, last_time, frame.time) if gyro_log is not None else None
             t0 = time.perf_counter()
             gv = ego.update(frame.image, dt=dt, height=height, gyro=gyro)

@@ -74,6 +74,13 @@ def render_localize(args: argparse.Namespace) -> int:
           f"ground_truth.csv to {out}")
     return 0
 
+def _truth(path: str | None) -> dict[str, np.ndarray] | None:
+    """The ``--truth`` CSV's columns ``t, x, y, z`` (None without one)."""
+    if not path:
+        return None
+    return dict(zip(("t", "x", "y", "z"), finite_rows(path, "--truth", ("t", "x", "y", "z"), "localize").T, strict=True))
+
+
 def localize(args: argparse.Namespace) -> int:
     """``visloc localize``: the camera's position over a marker map per frame, filtered by a
     constant-velocity Kalman filter (filterpy) into position and velocity with uncertainty.
@@ -98,10 +105,7 @@ def localize(args: argparse.Namespace) -> int:
     dictionary_for(args, "localize", mmap)
     find = _map_finder(args, mmap)
     camera = Camera.from_file(args.camera)
-    truth = None
-    if args.truth:
-        truth = dict(zip(("t", "x", "y", "z"), finite_rows(args.truth, "--truth", ("t", "x", "y", "z"), "localize").T,
-                         strict=True))
+    truth = _truth(args.truth)
     imu = imu_input(args, ("t", "fx", "fy", "fz"), "localize")
     fusion = MapFixFusion(accel_noise=args.accel_noise)  # the map's z axis points up: gravity (0, 0, -9.81)
     R_map_cam = None
@@ -119,11 +123,13 @@ def localize(args: argparse.Namespace) -> int:
         for frame in frames_of(source, args):
             n_frames += 1
             row: dict = {"frame": frame.index, "time": frame.time, "source": frame.name}
-            if frame.image is None:
+            back = frame.image is not None and last_t is not None and frame.time < last_t  # recorded, skipped
+            if frame.image is None or back:
                 failed += 1
-                warn("localize", frame.error or f"cannot read {frame.name}")
+                warn("localize", f"{frame.name}: time {frame.time} s before the previous frame's {last_t} s; skipped"
+                     if back else frame.error or f"cannot read {frame.name}")
                 if out:
-                    out.write(row | {"fix": "unreadable"})
+                    out.write(row | {"fix": "time went back" if back else "unreadable"})
                 continue
             cam = camera_for(camera, frame.image.shape, warned, "localize")
             mp = estimate_camera_pose(find(frame.image, cam, last_pose), mmap, cam, start=last_pose)  # from the last fix
@@ -269,16 +275,18 @@ def track(args: argparse.Namespace) -> int:
         for frame in frames_of(source, args):
             n_frames += 1
             rec: dict = {"frame": frame.index, "source": frame.name, "time": frame.time}
+            dt = None if last_time is None else frame.time - last_time
             if frame.image is None:
                 failed += 1
                 warn("track", frame.error or f"cannot read {frame.name}")
                 rec["error"] = frame.error
+            elif dt is not None and not dt > 0:  # recorded and skipped, the run goes on from the last good frame
+                failed += 1
+                rec["error"] = f"time {frame.time} s not after the previous frame's {last_time} s"
+                warn("track", f"{frame.name}: {rec['error']}; skipped")
             else:
                 cam = camera_for(camera, frame.image.shape, warned, "track")
                 bp = track_body(find(frame.image), body, reference, cam)
-                dt = None if last_time is None else frame.time - last_time
-                if dt is not None and not dt > 0:
-                    raise UsageError(f"frame times must increase; {frame.name} is at {frame.time} s")
                 if bp is None:
                     lost += 1
                     rec["lost"] = True

@@ -68,7 +68,7 @@ def detect(args: argparse.Namespace) -> int:
                 failed += 1
                 warn("detect", frame.error or f"cannot read {frame.name}")
                 if out:
-                    out.write({"frame": frame.index, "source": frame.name, "error": frame.error})
+                    out.write({"frame": frame.index, "time": frame.time, "source": frame.name, "error": frame.error})
                 continue
             t0 = time.perf_counter()
             if explain_dir is not None:

@@ -226,7 +226,9 @@ class VideoSource(FrameSource):
 
     ``time`` is the stream timestamp (``CAP_PROP_POS_MSEC`` after each read) in seconds. If
     ``fps`` is given it overrides the container and ``time = index / fps``; if the backend
-    reports no usable timestamps, ``index / CAP_PROP_FPS`` is used. A frame the decoder cannot
+    reports no usable timestamps, ``index / CAP_PROP_FPS`` is used, and from a first unusable
+    one on (not finite, negative or not increasing) the times go on from the last stamp at
+    ``CAP_PROP_FPS`` (never back). A frame the decoder cannot
     deliver (corrupt bytes) is skipped and reading goes on; the stream ends after
     :data:`MAX_BAD_READS` failed reads in a row. When frames were lost, or fewer arrived than the
     container declares (a truncated file), a last frame without an image says so in its
@@ -279,7 +281,7 @@ class VideoSource(FrameSource):
         capture = self._capture
         index = lost = bad = 0
         last_time = -math.inf
-        use_stamps = self.fps is None
+        clock = _FrameClock(self.fps or self.native_fps, stamps=self.fps is None)
         while not self._closed:
             ok, image = capture.read()
             if not ok or image is None:
@@ -289,15 +291,7 @@ class VideoSource(FrameSource):
                 continue
             lost += bad  # failed reads followed by a good frame: corrupt frames skipped
             bad = 0
-            stamp = capture.get(cv2.CAP_PROP_POS_MSEC) / 1000.0
-            if use_stamps and (not math.isfinite(stamp) or stamp < 0 or stamp <= last_time):
-                use_stamps = False  # backend without usable timestamps: fall back to index / fps
-            if use_stamps:
-                t = stamp
-            else:
-                rate = self.fps or self.native_fps
-                t = index / rate if rate else float(index)
-            last_time = t
+            t = last_time = clock.time(index, capture.get(cv2.CAP_PROP_POS_MSEC) / 1000.0)
             yield Frame(index, t, _to_uint8(image), f"{self.path}#{index}")
             index += 1
         if self._closed:
@@ -313,6 +307,29 @@ class VideoSource(FrameSource):
         """Release the capture."""
         self._capture.release()
         super().close()
+
+
+class _FrameClock:
+    """A video's frame times: the stream's stamps (s) while they are usable (finite, >= 0 and
+    increasing), then, from the first that is not, ``1 / rate`` after the last time given (the
+    stamps' clock goes on at the frame rate: no jump back to ``index / rate``); ``index /
+    rate`` throughout without stamps (``stamps=False``); ``rate`` None or 0: one second per
+    frame."""
+
+    def __init__(self, rate: float | None, *, stamps: bool) -> None:
+        self.step = 1.0 / rate if rate else 1.0
+        self.stamps = stamps
+        self.offset = 0.0  # added to index * step once the stamps are given up
+        self.last = -math.inf
+
+    def time(self, index: int, stamp: float) -> float:
+        """The time (s) of frame ``index`` whose stream stamp is ``stamp`` (s)."""
+        if self.stamps and (not math.isfinite(stamp) or stamp < 0 or stamp <= self.last):
+            self.stamps = False  # backend without usable timestamps from here on
+            if math.isfinite(self.last):
+                self.offset = self.last + self.step - index * self.step
+        self.last = stamp if self.stamps else self.offset + index * self.step
+        return self.last
 
 
 class CameraSource(FrameSource):

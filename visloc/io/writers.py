@@ -58,7 +58,9 @@ def to_jsonable(obj: Any, _where: str = "obj") -> Any:
     Raises
     ------
     TypeError
-        If some value has no JSON form; the message gives its location, e.g. ``obj['pose']``.
+        If some value has no JSON form, or two keys of a mapping have the same string form
+        (``{1: ..., "1": ...}``: one value would be lost); the message gives the location, e.g.
+        ``obj['pose']``.
     """
     if obj is None or isinstance(obj, (bool, str)):
         return obj
@@ -71,7 +73,14 @@ def to_jsonable(obj: Any, _where: str = "obj") -> Any:
     if isinstance(obj, np.ndarray):
         return to_jsonable(obj.tolist(), _where)
     if isinstance(obj, Mapping):
-        return {_json_key(k, _where): to_jsonable(v, f"{_where}[{k!r}]") for k, v in obj.items()}
+        out = {_json_key(k, _where): to_jsonable(v, f"{_where}[{k!r}]") for k, v in obj.items()}
+        if len(out) != len(obj):  # two keys with one string form: one value would be lost
+            seen: dict[str, object] = {}
+            for k in obj:
+                if (key := _json_key(k, _where)) in seen:
+                    raise TypeError(f"{_where}: the keys {seen[key]!r} and {k!r} both become {key!r} in JSON")
+                seen[key] = k
+        return out
     if isinstance(obj, (list, tuple)):
         return [to_jsonable(v, f"{_where}[{i}]") for i, v in enumerate(obj)]
     if isinstance(obj, (set, frozenset)):
@@ -293,7 +302,8 @@ class AnnotationSink(Closing):
     Raises
     ------
     ValueError
-        If ``fps`` is not positive or ``target`` is an existing file that is not a video.
+        If ``fps`` is not positive, ``target`` is an existing file that is not a video, or a
+        ``.mp4`` / ``.avi`` target is an existing folder.
     """
 
     def __init__(self, target: str | os.PathLike[str], fps: float = 30.0) -> None:
@@ -313,6 +323,9 @@ class AnnotationSink(Closing):
         suffix = self.target.suffix.lower()
         self.fourcc: str | None = VIDEO_FOURCC.get(suffix)
         if self.fourcc is not None:
+            if self.target.is_dir():  # refused now, not when the finished video is moved there
+                raise ValueError(f"target {target} is a folder: give a {suffix} file's path, or the folder without "
+                                 f"the {suffix} suffix for image files")
             self.target.parent.mkdir(parents=True, exist_ok=True)
         else:
             if self.target.exists() and not self.target.is_dir():

@@ -20,6 +20,7 @@ order, the same bits.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import NamedTuple
@@ -29,7 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from visloc._compiled import use_compiled
-from visloc.markers.dictionary import Dictionary
+from visloc.markers.dictionary import Dictionary, _check_binary, _check_int
 
 try:
     from visloc.markers import _cells
@@ -69,17 +70,26 @@ def square_to_quad(quads: NDArray) -> NDArray[np.float64]:
 
     Parameters
     ----------
-    quads : ndarray (K, 4, 2)
+    quads : ndarray (K, 4, 2) or (4, 2)
         Corners ``(x, y)`` of each quad, px; corner ``i`` is the image of the unit square's
         corner ``(0, 0), (1, 0), (1, 1), (0, 1)`` in turn.
 
     Returns
     -------
-    ndarray (K, 3, 3) float64
+    ndarray (K, 3, 3) or (3, 3) float64
         ``H`` per quad with ``[x w, y w, w] = H @ [u, v, 1]``, ``H[2, 2] = 1``: unit-square
         point ``(u, v)`` lands on image point ``(x, y)``, in the pixel convention of ``quads``.
+
+    Raises
+    ------
+    ValueError
+        If ``quads`` is not (K, 4, 2) or (4, 2).
     """
     q = np.asarray(quads, np.float64)
+    if q.shape[-2:] != (4, 2) or q.ndim not in (2, 3):
+        raise ValueError(f"quads must be (K, 4, 2) or (4, 2), got shape {q.shape}")
+    if q.ndim == 2:
+        return square_to_quad(q[None])[0]
     x0, x1, x2, x3 = (q[:, i, 0] for i in range(4))
     y0, y1, y2, y3 = (q[:, i, 1] for i in range(4))
     dx1, dx2, dx3 = x1 - x2, x3 - x2, x0 - x1 + x2 - x3
@@ -152,6 +162,31 @@ def _read_points(gray: NDArray[np.uint8], quads: NDArray, uv1: NDArray[np.float3
                                  for c in range(0, n_points, step)]) for r in range(0, k, step)])
 
 
+def _checked_quads(gray: NDArray[np.uint8], quads: NDArray, n: int, per_side: int) -> NDArray[np.float64]:
+    """``quads`` as (K, 4, 2) float64, having checked the arguments of :func:`sample_cells` and
+    :func:`cell_white_fractions` (scalar checks and one vectorised look at the corners)."""
+    if not isinstance(gray, np.ndarray) or gray.dtype != np.uint8:
+        raise TypeError(f"gray must be a uint8 array, got {getattr(gray, 'dtype', type(gray).__name__)}")
+    if gray.ndim != 2 or not gray.size:
+        raise ValueError(f"gray must be a non-empty (H, W) image, got shape {gray.shape}")
+    if type(n) is not int or type(per_side) is not int or n < 1 or per_side < 1:  # else plainly valid
+        _check_int(n, "n", 1)
+        _check_int(per_side, "per_side", 1)
+    q = np.asarray(quads, np.float64)
+    if q.shape[-2:] != (4, 2) or q.ndim not in (2, 3):
+        raise ValueError(f"quads must be (K, 4, 2) or (4, 2), got shape {q.shape}")
+    if not np.isfinite(q).all():
+        raise ValueError("quads: every corner must be finite")
+    return q[None] if q.ndim == 2 else q
+
+
+def _check_border(border: int, n: int) -> None:
+    """Raise unless a black border of ``border`` cells leaves bits inside ``n`` cells a side."""
+    _check_int(border, "border", 1)
+    if n <= 2 * border:
+        raise ValueError(f"n must be more than 2 border ({2 * border}), got {n}")
+
+
 _GRIDS: dict[tuple[int, int], NDArray[np.float32]] = {}  # (3, P) points u, v, 1 per (n, per_side)
 
 
@@ -162,15 +197,15 @@ def sample_cells(gray: NDArray[np.uint8], quads: NDArray, n: int, *, per_side: i
     Parameters
     ----------
     gray : ndarray (H, W) uint8
-        Grey image.
+        Grey image, not empty.
     quads : ndarray (K, 4, 2) or (4, 2)
         Corners ``(x, y)``, px, clockwise in the image; corner 0 is the grid's top-left. The
         corners are the outer corners of the cell area (pixel centres at integer
         coordinates: a pixel's area is ``[x - 0.5, x + 0.5]``). They must be finite.
     n : int
-        Cells per side including the black border (bits per side + 2 x border cells).
+        Cells per side including the black border (bits per side + 2 x border cells), >= 1.
     per_side : int
-        Samples across each cell (``per_side ** 2`` per cell, 0.2 cell apart), read as
+        Samples across each cell (>= 1; ``per_side ** 2`` per cell, 0.2 cell apart), read as
         ``cv2.remap`` reads them (bilinear, the image's edge pixels repeated beyond it).
     native : bool or None
         Compute the sampling maps with compiled code (``True``: ``visloc.markers._cells``,
@@ -184,15 +219,16 @@ def sample_cells(gray: NDArray[np.uint8], quads: NDArray, n: int, *, per_side: i
 
     Raises
     ------
+    TypeError
+        If ``gray`` is not a uint8 array, or ``n`` or ``per_side`` is not an integer.
     ValueError
-        If a corner is not finite.
+        If ``gray`` is empty or not (H, W), ``quads`` is not (K, 4, 2) or (4, 2), a corner is
+        not finite, or ``n`` or ``per_side`` is < 1.
     """
-    q = np.asarray(quads, np.float64).reshape(-1, 4, 2)
+    q = _checked_quads(gray, quads, n, per_side)
     m = per_side * per_side
     if len(q) == 0:
         return CellSample(np.zeros((0, n, n)), np.zeros((0, 4 * n + 4)), np.zeros((0, n, n, m), np.uint8))
-    if not np.isfinite(q).all():
-        raise ValueError("quads: every corner must be finite")
     if (n, per_side) not in _GRIDS:
         uv = _unit_grid(n, per_side)
         _GRIDS[n, per_side] = np.vstack([uv.T, np.ones(len(uv))]).astype(np.float32)
@@ -215,7 +251,7 @@ def read_cells(gray: NDArray[np.uint8], quads: NDArray, n: int, *, per_side: int
     ----------
     gray, quads : as :func:`sample_cells`
     n : int
-        Cells per side including the black border (bits per side + 2 ``border``).
+        Cells per side including the black border (bits per side + 2 ``border``), > 2 ``border``.
     per_side : int
         Samples across each cell (:func:`sample_cells`).
     border_error_rate : float
@@ -223,7 +259,7 @@ def read_cells(gray: NDArray[np.uint8], quads: NDArray, n: int, *, per_side: int
     min_contrast : float
         Least difference between the white and black class means, grey levels.
     border : int
-        Width of the black border in cells.
+        Width of the black border in cells, >= 1.
     min_quiet_zone : float
         Least fraction of the ring cells that must be white (:func:`read_bits`).
     native : bool or None
@@ -239,8 +275,10 @@ def read_cells(gray: NDArray[np.uint8], quads: NDArray, n: int, *, per_side: int
 
     Raises
     ------
+    TypeError
+        As :func:`sample_cells`, or if ``border`` is not an integer.
     ValueError
-        If a corner is not finite.
+        As :func:`sample_cells`, or if ``border`` is < 1 or ``n`` is not more than 2 ``border``.
     RuntimeError
         If ``native=True`` and the compiled module was not built.
     """
@@ -248,7 +286,8 @@ def read_cells(gray: NDArray[np.uint8], quads: NDArray, n: int, *, per_side: int
     k = len(sample.cells)
     if k == 0 or not use_compiled(native, _cells, "visloc.markers._cells"):
         return sample, read_bits(sample, border_error_rate=border_error_rate, min_contrast=min_contrast,
-                                 border=border, min_quiet_zone=min_quiet_zone)
+                                 border=border, min_quiet_zone=min_quiet_zone)  # (checks border)
+    _check_border(border, n)
     s = n - 2 * border
     valid, bits, scal = _cells.read_samples(np.ascontiguousarray(sample.samples), np.ascontiguousarray(sample.ring),
                                             k, n, per_side * per_side, border, float(border_error_rate),
@@ -280,11 +319,11 @@ def cell_white_fractions(gray: NDArray[np.uint8], quads: NDArray, n: int, thresh
     ----------
     gray, quads : as :func:`sample_cells`
     n : int
-        Cells per side including the border.
+        Cells per side including the border, >= 1.
     threshold : ndarray (K,)
-        Each marker's grey-level threshold.
+        Each marker's grey-level threshold, one per quad.
     per_side : int
-        Samples across a cell's read area (``per_side ** 2`` per cell, evenly spread).
+        Samples across a cell's read area (>= 1; ``per_side ** 2`` per cell, evenly spread).
     margin : float
         Fraction of the cell left out on each side, in [0, 0.5) (OpenCV's
         ``perspectiveRemoveIgnoredMarginPerCell``, 0.13).
@@ -296,14 +335,24 @@ def cell_white_fractions(gray: NDArray[np.uint8], quads: NDArray, n: int, thresh
     ndarray (K, n, n) float64
         Fraction in [0, 1] of each cell's samples brighter than its marker's threshold; row
         0 runs from corner 0 to corner 1, column 0 from corner 0 to corner 3.
+
+    Raises
+    ------
+    TypeError
+        As :func:`sample_cells`.
+    ValueError
+        As :func:`sample_cells`, or if ``threshold`` does not hold one value per quad.
     """
-    q = np.asarray(quads, np.float64).reshape(-1, 4, 2)
+    q = _checked_quads(gray, quads, n, per_side)
+    t = np.asarray(threshold, np.float64)
+    if t.size != len(q):
+        raise ValueError(f"threshold must hold one value per quad ({len(q)}), got shape {t.shape}")
     if len(q) == 0:
         return np.zeros((0, n, n))
     uv1 = _area_grid(n, per_side, float(margin))
     side = n * per_side
     vals = _read_points(gray, q, uv1, native)
-    white = vals > np.asarray(threshold, np.float64).reshape(-1, 1)
+    white = vals > t.reshape(-1, 1)
     # the count of each cell's samples, one axis at a time (a third of mean(axis=(2, 4))'s time)
     count = white.view(np.uint8).reshape(len(q), n, per_side, side).sum(axis=2, dtype=np.uint32)
     return count.reshape(len(q), n, n, per_side).sum(axis=3) / (per_side * per_side)
@@ -322,10 +371,21 @@ def otsu_threshold(values: NDArray) -> tuple[NDArray, NDArray, NDArray]:
     threshold, dark_mean, bright_mean : ndarray (K,) float64
         The two classes' mean grey levels at the split that maximises the between-class
         variance, and the threshold midway between them.
+
+    Raises
+    ------
+    ValueError
+        If ``values`` is not (K, m) or (m,) with m >= 2, or holds NaN or infinite values (or
+        a row whose sum overflows float64).
     """
-    v = np.sort(np.atleast_2d(np.asarray(values, np.float64)), axis=1)
+    v = np.asarray(values, np.float64)
+    if v.ndim not in (1, 2) or v.shape[-1] < 2:
+        raise ValueError(f"values must be (K, m) or (m,) with m >= 2, got shape {v.shape}")
+    v = np.sort(np.atleast_2d(v), axis=1)
     m = v.shape[1]
     c = np.cumsum(v, axis=1)
+    if not np.isfinite(c[:, -1]).all():  # a row's sum: NaN or infinite with any of its values
+        raise ValueError("values must be finite (and sum to less than float64's largest value)")
     k = np.arange(1, m)
     m0 = c[:, :-1] / k
     m1 = (c[:, -1:] - c[:, :-1]) / (m - k)
@@ -381,7 +441,8 @@ def read_bits(
     min_contrast : float
         Least difference between the white and black class means, grey levels.
     border : int
-        Width of the black border in cells (OpenCV's ``markerBorderBits``).
+        Width of the black border in cells (OpenCV's ``markerBorderBits``), >= 1 and less than
+        half the cells a side.
     min_quiet_zone : float
         Least fraction of the ring cells just outside the border that must be white: a
         printed marker sits in a white quiet zone, a dark patch with bright specks in it
@@ -397,9 +458,18 @@ def read_bits(
     BitRead
         ``valid`` (K,) bool, ``bits`` (K, n - 2 border, n - 2 border) uint8 (1 = white),
         ``margin`` (K,) in [0, 1], ``contrast`` (K,) and ``threshold`` (K,) in grey levels.
+
+    Raises
+    ------
+    TypeError
+        If ``border`` is not an integer.
+    ValueError
+        If ``border`` is < 1 or leaves no cell inside it (n <= 2 ``border``), or the cells
+        (:func:`otsu_threshold`) are not finite.
     """
     cells = sample.cells
     k, n, _ = cells.shape
+    _check_border(border, n)
     values = np.concatenate([cells.reshape(k, -1), sample.ring], axis=1)
     thr, dark, bright = otsu_threshold(values)
     contrast = bright - dark
@@ -448,9 +518,9 @@ def decode(
 
     Parameters
     ----------
-    bits : ndarray (K, s, s) uint8
-        Inner cells read from K candidates, 1 = white, row 0 running from candidate corner
-        0 to corner 1 (:func:`read_bits`); ``s`` is ``dictionary.marker_size``.
+    bits : ndarray (K, s, s) uint8 or bool
+        Inner cells read from K candidates (K may be 0), 0/1 (1 = white), row 0 running from
+        candidate corner 0 to corner 1 (:func:`read_bits`); ``s`` is ``dictionary.marker_size``.
     dictionary : Dictionary
         The markers to match.
     error_correction_rate : float
@@ -467,17 +537,22 @@ def decode(
     Raises
     ------
     ValueError
-        If ``bits`` does not hold ``s * s`` cells per candidate.
+        If ``bits`` does not hold ``s * s`` cells per candidate or holds values other than 0
+        and 1.
     """
-    b = np.asarray(bits).reshape(len(bits), -1).astype(np.uint64)
-    if b.shape[1] != dictionary.marker_size**2:
-        raise ValueError(f"bits must be (K, {dictionary.marker_size}, {dictionary.marker_size}), got {np.shape(bits)}")
-    weights = np.left_shift(np.uint64(1), np.arange(b.shape[1], dtype=np.uint64))
+    b = np.asarray(bits)
+    s2 = dictionary.marker_size**2
+    if b.ndim == 0 or math.prod(b.shape[1:]) != s2:
+        raise ValueError(f"bits must be (K, {dictionary.marker_size}, {dictionary.marker_size}), got {b.shape}")
+    _check_binary(b, "bits")
+    k = len(b)
+    b = b.reshape(k, s2).astype(np.uint64)
+    weights = np.left_shift(np.uint64(1), np.arange(s2, dtype=np.uint64))
     codes = (b * weights).sum(axis=1, dtype=np.uint64)
-    dist = np.bitwise_count(codes[:, None, None] ^ dictionary.codes[None])  # (K, n_ids, 4)
-    flat = dist.reshape(len(b), -1).argmin(axis=1)
+    dist = np.bitwise_count(codes[:, None] ^ dictionary.codes.reshape(1, -1))  # (K, 4 n_ids): id, then rotation
+    flat = dist.argmin(axis=1)
     ids, r = np.divmod(flat, 4)
-    hamming = dist.reshape(len(b), -1)[np.arange(len(b)), flat].astype(np.intp)
+    hamming = dist[np.arange(k), flat].astype(np.intp)
     ok = hamming <= int(dictionary.max_correction * error_correction_rate)
     # observed = rot90(true, r) (counter-clockwise quarter turns): the true top-left cell
     # is then at candidate corner 0, 3, 2, 1 for r = 0, 1, 2, 3.

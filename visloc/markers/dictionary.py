@@ -33,14 +33,15 @@ class Dictionary:
     name : str
         Predefined name or file path it came from.
     bits : ndarray (n, s, s) uint8
-        Bit pattern of every marker (1 = white cell), row 0 at the marker's top.
+        Bit pattern of every marker (1 = white cell), row 0 at the marker's top; read-only
+        (a loaded dictionary is shared by every caller that loads it).
     max_correction : int
         Bits the dictionary can correct by design: ``(d_min - 1) // 2`` where ``d_min`` is the
         smallest Hamming distance between two markers in any rotation (OpenCV's
         ``maxCorrectionBits``).
     codes : ndarray (n, 4) uint64
         Packed bits of each marker rotated by ``r`` quarter turns counter-clockwise
-        (``np.rot90(bits, r)``), for matching.
+        (``np.rot90(bits, r)``), for matching; read-only.
     """
 
     name: str
@@ -85,13 +86,15 @@ class Dictionary:
 
         Raises
         ------
+        TypeError
+            If ``marker_id``, ``cell_px`` or ``border_bits`` is not an integer (a bool is not).
         ValueError
-            If ``marker_id`` is not in ``[0, len(self) - 1]`` or ``cell_px`` < 1.
+            If ``marker_id`` is not in ``[0, len(self) - 1]``, ``cell_px`` < 1 or
+            ``border_bits`` < 0.
         """
-        if not 0 <= marker_id < len(self):
-            raise ValueError(f"marker_id must be in [0, {len(self) - 1}], got {marker_id}")
-        if cell_px < 1:
-            raise ValueError(f"cell_px must be >= 1, got {cell_px}")
+        _check_int(marker_id, "marker_id", 0, len(self) - 1)
+        _check_int(cell_px, "cell_px", 1)
+        _check_int(border_bits, "border_bits", 0)
         grid = np.pad(self.bits[marker_id], border_bits).astype(np.uint8) * 255
         return np.kron(grid, np.ones((cell_px, cell_px), np.uint8))
 
@@ -116,7 +119,15 @@ class Dictionary:
             ``np.rot90(self.bits[id], rotation)`` (``rotation`` quarter turns counter-clockwise,
             0-3) up to ``hamming`` flipped bits, or ``None`` when no marker is within
             ``max_errors`` bits.
+
+        Raises
+        ------
+        ValueError
+            If ``bits`` is not ``(s, s)`` or holds values other than 0 and 1.
         """
+        s = self.marker_size
+        if np.shape(bits) != (s, s):
+            raise ValueError(f"bits must be ({s}, {s}) for this dictionary, got shape {np.shape(bits)}")
         code = pack_bits(bits)
         dist = np.bitwise_count(self.codes ^ code)
         flat = int(np.argmin(dist))
@@ -133,17 +144,47 @@ def pack_bits(bits: NDArray) -> np.uint64:
     Parameters
     ----------
     bits : ndarray (s, s) or any shape
-        0/1 values, at most 64 of them, read row-major.
+        0/1 values (or bools), at most 64 of them, read row-major.
 
     Returns
     -------
     numpy.uint64
         Value ``i`` (row-major) in bit ``i``, least significant first (as :class:`Dictionary`
         packs its ``codes``).
+
+    Raises
+    ------
+    ValueError
+        If ``bits`` holds more than 64 values or values other than 0 and 1.
     """
-    flat = np.asarray(bits, np.uint64).ravel()
+    b = np.asarray(bits)
+    if b.size > 64:
+        raise ValueError(f"bits: a uint64 packs at most 64 values, got {b.size}")
+    _check_binary(b, "bits")
+    flat = b.astype(np.uint64).ravel()
     weights = np.left_shift(np.uint64(1), np.arange(flat.size, dtype=np.uint64))
     return np.uint64(np.sum(flat * weights, dtype=np.uint64))
+
+
+def _check_binary(b: NDArray, name: str) -> None:
+    """Raise a ValueError naming ``name`` unless every value of ``b`` is 0 or 1: one
+    vectorised look (the maximum of unsigned integers, none for bools)."""
+    kind = b.dtype.kind
+    if kind == "b" or not b.size or (b.max() <= 1 if kind == "u" else ((b == 0) | (b == 1)).all()):
+        return
+    bad = b[(b != 0) & (b != 1)].flat[0]
+    raise ValueError(f"{name} must hold only 0 and 1, got {bad}")
+
+
+def _check_int(value: object, name: str, least: int, most: int | None = None) -> None:
+    """Raise a TypeError naming ``name`` unless ``value`` is an integer (Python's or numpy's,
+    not a bool), a ValueError unless it is in ``[least, most]`` (``most`` None: no bound)."""
+    if type(value) is not int and (isinstance(value, bool) or not isinstance(value, (int, np.integer))):
+        raise TypeError(f"{name} must be an integer, got {type(value).__name__}")
+    if most is not None and not least <= value <= most:  # type: ignore[operator]
+        raise ValueError(f"{name} must be in [{least}, {most}], got {value}")
+    if value < least:  # type: ignore[operator]
+        raise ValueError(f"{name} must be >= {least}, got {value}")
 
 
 def _build(name: str, bits: NDArray[np.uint8], max_correction: int | None, *, check: bool = False) -> Dictionary:
@@ -164,6 +205,8 @@ def _build(name: str, bits: NDArray[np.uint8], max_correction: int | None, *, ch
     elif check and max_correction > capacity:
         raise ValueError(f"dictionary {name!r}: maxCorrectionBits {max_correction} exceeds what its markers allow "
                          f"({max(capacity, 0)}: their smallest distance in any rotation, less one, halved)")
+    bits.setflags(write=False)  # shared: _predefined hands the same Dictionary to every caller
+    codes.setflags(write=False)
     return Dictionary(name, bits, int(max(max_correction, 0)), codes)
 
 

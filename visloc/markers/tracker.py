@@ -24,6 +24,7 @@ full detection is no longer needed (``visloc localize`` and the simulation's vis
 
 from __future__ import annotations
 
+import math
 import numbers
 from collections.abc import Mapping
 
@@ -65,7 +66,7 @@ class MarkerTracker:
             raise ValueError("detector: a tracker needs stage 8 (refine=True) to follow markers")
         if isinstance(redetect_every, bool) or not isinstance(redetect_every, numbers.Integral) or redetect_every < 1:
             raise ValueError(f"redetect_every must be an integer >= 1, got {redetect_every!r}")
-        if isinstance(keep, bool) or not isinstance(keep, (int, float)) or not 0.0 < keep <= 1.0:
+        if isinstance(keep, bool) or not isinstance(keep, numbers.Real) or not 0.0 < keep <= 1.0:
             raise ValueError(f"keep must be a number in (0, 1], got {keep!r}")
         self.detector = detector
         self.redetect_every = int(redetect_every)
@@ -112,9 +113,11 @@ class MarkerTracker:
 
         Raises
         ------
+        TypeError
+            ``expected`` not a mapping, or one of its ids a bool or not a number.
         ValueError
             An image that is not uint8 grey or BGR; ``expected`` corners that are not (4, 2)
-            finite numbers.
+            finite numbers, or an id with a fraction (2.0 is marker 2; 2.7 no marker).
         """
         gray = to_gray(image)
         new = self._new_expected(expected)
@@ -127,13 +130,18 @@ class MarkerTracker:
             self._since = 0
         else:
             self._since += 1
-        now = {(d.id, d.inverted): d.corners for d in dets}
+        # copies: a caller editing a returned detection's corners must not move the next prediction
+        now = {(d.id, d.inverted): d.corners.copy() for d in dets}
         self._before, self._last = self._last, now
         return dets
 
     def _new_expected(self, expected: Mapping[int, ArrayLike] | None) -> dict[tuple[int, bool], NDArray]:
         """The expected markers not followed yet, keyed as the followed ones (all the corners
         checked at once)."""
+        if expected is None:
+            return {}
+        if not isinstance(expected, Mapping):
+            raise TypeError(f"expected must be a mapping of id to corners, got {type(expected).__name__}")
         if not expected:
             return {}
         try:
@@ -143,7 +151,8 @@ class MarkerTracker:
         if q.shape[1:] != (4, 2) or not np.isfinite(q).all():
             raise ValueError("expected: each marker's corners must be (4, 2) finite numbers")
         polarity = self.detector.params.inverted is True
-        return {(int(i), polarity): c for i, c in zip(expected, q, strict=True) if (int(i), polarity) not in self._last}
+        ids = _whole_ids(list(expected))
+        return {(i, polarity): q[k] for k, i in enumerate(ids) if (i, polarity) not in self._last}
 
     def _follow(self, gray: NDArray[np.uint8], new: dict[tuple[int, bool], NDArray]) -> list[MarkerDetection] | None:
         """The followed markers (and the ``new`` expected ones) confirmed in ``gray``; None if
@@ -191,3 +200,26 @@ class MarkerTracker:
             new = now[~seen].reshape(-1, 2)
             pred[~seen] = (np.hstack([new, np.ones((len(new), 1))]) @ affine).reshape(-1, 4, 2)
         return pred
+
+
+def _whole_ids(ids: list) -> list[int]:
+    """``expected``'s marker ids as ints, checked at once when they make one numeric array:
+    integers, or floats without a fraction (a fraction or a non-finite float: ``ValueError``;
+    a bool or a non-number: ``TypeError``)."""
+    try:
+        a = np.asarray(ids)
+    except (TypeError, ValueError, OverflowError):
+        a = np.asarray(ids, dtype=object)
+    if a.ndim == 1 and a.dtype.kind in "iu":
+        return a.tolist()
+    if a.ndim == 1 and a.dtype.kind == "f":
+        whole = (np.abs(a) < 2.0**63) & (a == np.floor(a))  # NaN fails both, inf the first
+        if not whole.all():
+            raise ValueError(f"expected: marker ids must be whole numbers, got {a[~whole][0].item()!r}")
+        return a.astype(np.int64).tolist()
+    for i in ids:  # no common numeric dtype: bools, non-numbers (tuples too), or ints beyond int64
+        if isinstance(i, (bool, np.bool_)) or not isinstance(i, numbers.Real):
+            raise TypeError(f"expected: marker ids must be whole numbers, got {i!r}")
+        if not isinstance(i, numbers.Integral) and not (math.isfinite(i) and i == math.floor(i)):
+            raise ValueError(f"expected: marker ids must be whole numbers, got {i!r}")
+    return [int(i) for i in ids]

@@ -14,6 +14,7 @@ disagree with the rest are dropped and the fit repeated.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
 from statistics import median
 
@@ -45,7 +46,8 @@ class MapPose:
     used : list of int
         Ids of the markers in the final fit.
     rejected : list of int
-        Map markers seen but dropped as inconsistent with the rest.
+        Map markers seen but dropped: detected more than once (first), or inconsistent with
+        the rest.
     unknown : list of int
         Ids seen that are not in the map (ignored).
     residuals : dict of int -> float
@@ -120,8 +122,9 @@ def estimate_camera_pose(
     Parameters
     ----------
     detections : list of MarkerDetection
-        Markers found in the image, corners in pixels (ids not in the map are ignored and
-        listed).
+        Markers found in the image, corners (4, 2) in pixels (ids not in the map are ignored
+        and listed; a map marker detected more than once is not used, and listed as rejected:
+        which detection is the marker is not known).
     marker_map : MarkerMap
         The markers' corners in the map frame, m.
     camera : Camera
@@ -157,7 +160,8 @@ def estimate_camera_pose(
         ``start`` not a :class:`~visloc.types.Pose`.
     ValueError
         ``pixel_sigma`` (unless None) or ``max_residual`` not a finite number > 0;
-        ``max_iter`` or ``n_starts`` not a whole number > 0.
+        ``max_iter`` or ``n_starts`` not a whole number > 0; a detection of a map marker
+        whose corners are not (4, 2) finite numbers (the message names the marker).
     """
     if not isinstance(marker_map, MarkerMap):
         raise TypeError(f"marker_map must be a MarkerMap, got {type(marker_map).__name__}")
@@ -175,12 +179,23 @@ def estimate_camera_pose(
             raise ValueError(f"estimate_camera_pose: {name} must be {kind} > 0, got {v!r}")
     known = [d for d in detections if d.id in marker_map]
     unknown = sorted({int(d.id) for d in detections if d.id not in marker_map})
+    ids = [int(d.id) for d in known]
+    repeated: list[int] = []
+    if len(set(ids)) < len(ids):  # which copy is the marker is unknown: none is used
+        repeated = sorted({i for i in ids if ids.count(i) > 1})
+        known = [d for d, i in zip(known, ids, strict=True) if i not in repeated]
+        ids = [int(d.id) for d in known]
     if not known:
         return None
-    ids = [int(d.id) for d in known]
+    try:
+        px = np.array([d.corners for d in known], dtype=np.float64)  # (M, 4, 2)
+    except (TypeError, ValueError):  # ragged, or not numbers
+        px = None
+    if px is None or px.shape[1:] != (4, 2) or not _all_finite(px):
+        raise ValueError(_bad_corners(known))
     all_ids, all_corners = marker_map.stacked
     obj = all_corners[np.searchsorted(all_ids, ids)]  # (M, 4, 3)
-    xy = camera.normalize(np.concatenate([d.corners for d in known])).reshape(-1, 4, 2)  # (M, 4, 2)
+    xy = camera.normalize(px.reshape(-1, 2)).reshape(-1, 4, 2)  # (M, 4, 2)
     f = np.array([[camera.fx], [camera.fy]])
     fit = None
     if start is not None:  # a pose near the answer: kept only if no marker disagrees with it
@@ -195,6 +210,7 @@ def estimate_camera_pose(
             return None
         fit = _joint_fit(first, obj, xy, f, camera, ids, max_iter, max_residual)
     best, keep, rejected, res = fit
+    rejected = repeated + rejected
     X = obj[keep].reshape(-1, 3)
     M = levenberg_marquardt(best[None], X.T, xy[keep].reshape(-1, 2).T, f, max_iter=0)[2][0]  # [J | r]^T [J | r]
     n = 2 * X.shape[0]
@@ -204,6 +220,28 @@ def estimate_camera_pose(
     pose = Pose(R, best[:3].copy(), rms, cov)
     return MapPose(pose, [i for i, k in zip(ids, keep, strict=True) if k], rejected, unknown,
                    {i: float(r) for i, r in zip(ids, res, strict=True)})
+
+
+def _all_finite(a: FloatArray) -> bool:
+    """``np.isfinite(a).all()``, a little faster for the usual all-finite array: a finite sum
+    of squares (a NaN or an inf makes it NaN or inf) needs no more; only a non-finite one, which
+    may be an overflow of huge finite values, is looked at element by element."""
+    v = a.ravel()
+    return math.isfinite(v @ v) or bool(np.isfinite(v).all())
+
+
+def _bad_corners(known: list[MarkerDetection]) -> str:
+    """The message naming the first detection whose corners are not (4, 2) finite numbers."""
+    for d in known:
+        try:
+            c = np.asarray(d.corners, dtype=np.float64)
+        except (TypeError, ValueError):
+            return f"detections: marker {d.id}'s corners must be (4, 2) numbers, got {d.corners!r}"
+        if c.shape != (4, 2):
+            return f"detections: marker {d.id}'s corners must be (4, 2), got {c.shape}"
+        if not np.isfinite(c).all():
+            return f"detections: marker {d.id}'s corners must be finite, got {c.tolist()}"
+    return "detections: each marker's corners must be (4, 2) finite numbers"
 
 
 def _best_start(known: list[MarkerDetection], ids: list[int], obj: FloatArray, xy: FloatArray, f: FloatArray,
@@ -315,9 +353,12 @@ def markers_in_view(marker_map: MarkerMap, camera: Camera, pose: Pose, *, size: 
     Raises
     ------
     TypeError
-        ``marker_map``, ``camera`` or ``pose`` of the wrong type.
+        ``marker_map``, ``camera`` or ``pose`` of the wrong type; ``size`` not a pair of
+        numbers.
     ValueError
-        No ``size`` given and none in ``camera``; a negative or non-finite ``margin``.
+        No ``size`` given and none in ``camera``; a ``size`` of other than two finite whole
+        numbers > 0; a pose whose ``R`` or ``t`` is not finite; ``margin`` not a finite
+        number >= 0.
     """
     if not isinstance(marker_map, MarkerMap):
         raise TypeError(f"marker_map: expected a MarkerMap, got {type(marker_map).__name__}")
@@ -325,11 +366,18 @@ def markers_in_view(marker_map: MarkerMap, camera: Camera, pose: Pose, *, size: 
         raise TypeError(f"camera: expected a Camera, got {type(camera).__name__}")
     if not isinstance(pose, Pose):
         raise TypeError(f"pose: expected a Pose, got {type(pose).__name__}")
-    w, h = size if size is not None else camera.size or (0, 0)
-    if w <= 0 or h <= 0:
-        raise ValueError("size: give the image's (width, height); the camera has no size")
-    if not (isinstance(margin, (int, float)) and np.isfinite(margin) and margin >= 0):
+    if size is None:
+        if camera.size is None:
+            raise ValueError("size: give the image's (width, height); the camera has no size")
+        w, h = camera.size  # checked by the Camera
+    else:
+        w, h = _image_size(size)
+    if (type(margin) not in (float, int) and (isinstance(margin, bool) or not isinstance(margin, numbers.Real))
+            or not 0 <= margin < math.inf):
         raise ValueError(f"margin must be a finite number >= 0, got {margin!r}")
+    Rt = pose.R.ravel().tolist() + pose.t.ravel().tolist()  # 12 numbers: a finite sum is all finite; if
+    if not math.isfinite(sum(Rt)) and not all(map(math.isfinite, Rt)):  # not, maybe huge ones overflowed
+        raise ValueError(f"pose: R and t must be finite, got R={pose.R.tolist()}, t={pose.t.tolist()}")
     ids, obj = marker_map.stacked
     pc = obj.reshape(-1, 3) @ pose.R.T + pose.t  # (4M, 3)
     front = pc[:, 2] > 1e-6
@@ -345,3 +393,20 @@ def markers_in_view(marker_map: MarkerMap, camera: Camera, pose: Pose, *, size: 
     whole = inside.reshape(-1, 4).all(axis=1)
     quads = px.reshape(-1, 4, 2)
     return {i: quads[k] for k, i in zip(np.flatnonzero(whole).tolist(), ids[whole].tolist(), strict=True)}
+
+
+def _image_size(size: object) -> tuple[float, float]:
+    """``size`` as given, once checked to be ``(width, height)``: two finite whole numbers > 0."""
+    try:
+        w, h = size  # type: ignore[misc]
+    except (TypeError, ValueError) as exc:
+        kind = TypeError if isinstance(exc, TypeError) or isinstance(size, (str, bytes)) else ValueError
+        raise kind(f"size must be (width, height), two whole numbers, got {size!r}") from None
+    if type(w) is int and type(h) is int and w > 0 and h > 0:  # the usual case, at once
+        return w, h
+    for v in (w, h):
+        if isinstance(v, bool) or not isinstance(v, numbers.Real):
+            raise TypeError(f"size must be (width, height), two whole numbers, got {size!r}")
+        if not (0 < v < math.inf and v == math.floor(v)):
+            raise ValueError(f"size must be (width, height), two finite whole numbers > 0, got {size!r}")
+    return w, h

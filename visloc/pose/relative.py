@@ -88,7 +88,15 @@ def relative_pose(T_cam_body: Pose, T_cam_ref: Pose) -> Pose:
     -------
     Pose
         ``T_ref_body``: ``p_ref = R @ p_body + t``, m.
+
+    Raises
+    ------
+    TypeError
+        ``T_cam_body`` or ``T_cam_ref`` not a :class:`~visloc.types.Pose`.
     """
+    for name, value in (("T_cam_body", T_cam_body), ("T_cam_ref", T_cam_ref)):
+        if not isinstance(value, Pose):
+            raise TypeError(f"{name} must be a Pose, got {type(value).__name__}")
     return T_cam_ref.inverse().compose(T_cam_body)
 
 

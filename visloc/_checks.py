@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 import numbers
 
-__all__ = ["all_finite", "check_real"]
+__all__ = ["all_finite", "check_real", "marker_id"]
 
 
 def check_real(value: object, name: str, *, positive: bool = False, nonneg: bool = False,
@@ -64,3 +64,36 @@ def all_finite(arr: object) -> bool:
     import numpy as np  # (this module itself loads no numpy)
 
     return bool(np.isfinite(arr).all())
+
+
+def marker_id(value: object, where: str) -> int:
+    """A marker id as an int: a whole number (an integer, or a float with no fraction), or
+    raise naming ``where``.
+
+    Parameters
+    ----------
+    value : object
+        The id.
+    where : str
+        Where it came from, for the message (e.g. ``"expected"``).
+
+    Returns
+    -------
+    int
+
+    Raises
+    ------
+    TypeError
+        ``value`` is a bool or not a real number.
+    ValueError
+        ``value`` has a fraction or is not finite (no id is rounded into another).
+    """
+    if type(value) is int:  # the common case, without the ABC checks below
+        return value
+    if isinstance(value, numbers.Integral) and not isinstance(value, bool):
+        return int(value)
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise TypeError(f"{where}: marker ids must be whole numbers, got {value!r}")
+    if not (math.isfinite(value) and float(value).is_integer()):
+        raise ValueError(f"{where}: marker ids must be whole numbers, got {value!r}")
+    return int(value)

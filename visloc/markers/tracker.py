@@ -24,13 +24,13 @@ full detection is no longer needed (``visloc localize`` and the simulation's vis
 
 from __future__ import annotations
 
-import math
 import numbers
 from collections.abc import Mapping
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from visloc._checks import marker_id
 from visloc.markers.binarize import to_gray
 from visloc.markers.detector import MarkerDetector
 from visloc.types import MarkerDetection
@@ -151,7 +151,7 @@ class MarkerTracker:
         if q.shape[1:] != (4, 2) or not np.isfinite(q).all():
             raise ValueError("expected: each marker's corners must be (4, 2) finite numbers")
         polarity = self.detector.params.inverted is True
-        ids = _whole_ids(list(expected))
+        ids = [marker_id(i, "expected") for i in expected]
         return {(i, polarity): q[k] for k, i in enumerate(ids) if (i, polarity) not in self._last}
 
     def _follow(self, gray: NDArray[np.uint8], new: dict[tuple[int, bool], NDArray]) -> list[MarkerDetection] | None:
@@ -200,26 +200,3 @@ class MarkerTracker:
             new = now[~seen].reshape(-1, 2)
             pred[~seen] = (np.hstack([new, np.ones((len(new), 1))]) @ affine).reshape(-1, 4, 2)
         return pred
-
-
-def _whole_ids(ids: list) -> list[int]:
-    """``expected``'s marker ids as ints, checked at once when they make one numeric array:
-    integers, or floats without a fraction (a fraction or a non-finite float: ``ValueError``;
-    a bool or a non-number: ``TypeError``)."""
-    try:
-        a = np.asarray(ids)
-    except (TypeError, ValueError, OverflowError):
-        a = np.asarray(ids, dtype=object)
-    if a.ndim == 1 and a.dtype.kind in "iu":
-        return a.tolist()
-    if a.ndim == 1 and a.dtype.kind == "f":
-        whole = (np.abs(a) < 2.0**63) & (a == np.floor(a))  # NaN fails both, inf the first
-        if not whole.all():
-            raise ValueError(f"expected: marker ids must be whole numbers, got {a[~whole][0].item()!r}")
-        return a.astype(np.int64).tolist()
-    for i in ids:  # no common numeric dtype: bools, non-numbers (tuples too), or ints beyond int64
-        if isinstance(i, (bool, np.bool_)) or not isinstance(i, numbers.Real):
-            raise TypeError(f"expected: marker ids must be whole numbers, got {i!r}")
-        if not isinstance(i, numbers.Integral) and not (math.isfinite(i) and i == math.floor(i)):
-            raise ValueError(f"expected: marker ids must be whole numbers, got {i!r}")
-    return [int(i) for i in ids]

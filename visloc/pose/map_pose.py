@@ -21,6 +21,7 @@ from statistics import median
 import numpy as np
 from numpy.typing import NDArray
 
+from visloc._checks import all_finite
 from visloc.pose.camera import Camera
 from visloc.pose.gauss_newton import levenberg_marquardt, refine_params
 from visloc.pose.maps import MarkerMap
@@ -191,7 +192,7 @@ def estimate_camera_pose(
         px = np.array([d.corners for d in known], dtype=np.float64)  # (M, 4, 2)
     except (TypeError, ValueError):  # ragged, or not numbers
         px = None
-    if px is None or px.shape[1:] != (4, 2) or not _all_finite(px):
+    if px is None or px.shape[1:] != (4, 2) or not all_finite(px):
         raise ValueError(_bad_corners(known))
     all_ids, all_corners = marker_map.stacked
     obj = all_corners[np.searchsorted(all_ids, ids)]  # (M, 4, 3)
@@ -220,14 +221,6 @@ def estimate_camera_pose(
     pose = Pose(R, best[:3].copy(), rms, cov)
     return MapPose(pose, [i for i, k in zip(ids, keep, strict=True) if k], rejected, unknown,
                    {i: float(r) for i, r in zip(ids, res, strict=True)})
-
-
-def _all_finite(a: FloatArray) -> bool:
-    """``np.isfinite(a).all()``, a little faster for the usual all-finite array: a finite sum
-    of squares (a NaN or an inf makes it NaN or inf) needs no more; only a non-finite one, which
-    may be an overflow of huge finite values, is looked at element by element."""
-    v = a.ravel()
-    return math.isfinite(v @ v) or bool(np.isfinite(v).all())
 
 
 def _bad_corners(known: list[MarkerDetection]) -> str:
@@ -375,8 +368,7 @@ def markers_in_view(marker_map: MarkerMap, camera: Camera, pose: Pose, *, size: 
     if (type(margin) not in (float, int) and (isinstance(margin, bool) or not isinstance(margin, numbers.Real))
             or not 0 <= margin < math.inf):
         raise ValueError(f"margin must be a finite number >= 0, got {margin!r}")
-    Rt = pose.R.ravel().tolist() + pose.t.ravel().tolist()  # 12 numbers: a finite sum is all finite; if
-    if not math.isfinite(sum(Rt)) and not all(map(math.isfinite, Rt)):  # not, maybe huge ones overflowed
+    if not (all_finite(pose.R) and all_finite(pose.t)):
         raise ValueError(f"pose: R and t must be finite, got R={pose.R.tolist()}, t={pose.t.tolist()}")
     ids, obj = marker_map.stacked
     pc = obj.reshape(-1, 3) @ pose.R.T + pose.t  # (4M, 3)

@@ -18,29 +18,13 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from visloc._checks import marker_id
 from visloc._storage import open_storage
 from visloc.types import Pose
 
 __all__ = ["GridMap", "MarkerMap"]
 
 FloatArray = NDArray[np.float64]
-
-
-def _marker_id(value: object) -> int:
-    """A marker id as an int: a whole number (an int, or a float with no fraction); a
-    fraction raises ``ValueError`` (no id is rounded into another), a bool or a non-number
-    ``TypeError``."""
-    if isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"a marker id must be a whole number, got {value!r}")
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    try:
-        f = float(value)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        raise TypeError(f"a marker id must be a whole number, got {value!r}") from None
-    if not f.is_integer():
-        raise ValueError(f"a marker id must be a whole number, got {value!r}")
-    return int(f)
 
 
 def _marker_frame(corners: FloatArray) -> tuple[Pose, float]:
@@ -94,7 +78,7 @@ class MarkerMap:
             raise ValueError(f"dictionary must be a name or None, got {self.dictionary!r}")
         clean: dict[int, FloatArray] = {}
         for k, v in dict(self.corners).items():
-            k = _marker_id(k)
+            k = marker_id(k, "corners")
             arr = np.array(v, dtype=np.float64)  # a copy: the caller's array stays theirs
             arr.setflags(write=False)
             if arr.shape != (4, 3) or not np.isfinite(arr).all():
@@ -132,7 +116,7 @@ class MarkerMap:
         TypeError
             An id that is not a number.
         """
-        ids = [_marker_id(i) for i, _ in markers]
+        ids = [marker_id(i, "markers") for i, _ in markers]
         dup = sorted({i for i in ids if ids.count(i) > 1})
         if dup:
             raise ValueError(f"duplicate marker ids in the map: {dup}")
@@ -272,11 +256,7 @@ class MarkerMap:
                 vals = cn.mat() if cn.isMap() else np.array([cn.at(j).real() for j in range(cn.size())])
                 if vals is None or np.size(vals) != 12:
                     raise ValueError(f"marker map {p}: entry {k} must have 12 corner numbers")
-                try:
-                    marker_id = _marker_id(mid.real())
-                except ValueError as exc:
-                    raise ValueError(f"marker map {p}: entry {k}: {exc}") from None
-                items.append((marker_id, np.asarray(vals, float).reshape(4, 3)))
+                items.append((marker_id(mid.real(), f"marker map {p}: entry {k}"), np.asarray(vals, float).reshape(4, 3)))
         finally:
             fs.release()
         return cls.from_list(items, dictionary)

@@ -96,6 +96,18 @@ def test_scenarios_and_bad_input():
     assert {"status", "settling_time_s", "overshoot_pct", "position_rms_m", "realtime_factor"} <= set(d)
 
 
+
+def test_a_run_that_ends_before_its_step_has_no_step_metrics():
+    # sidestep's step is at 1 s: a 0.5 s run has no sample after it (it used to fail on an
+    # empty max); so does a run that crashes before its step
+    r = simulate("sidestep", seconds=0.5)
+    assert r.status is SimStatus.COMPLETED and r.t[-1] == pytest.approx(0.5)
+    assert r.metrics["overshoot_pct"] is None and r.metrics["settling_time_s"] is None
+    slam = Scenario("slam", "pushed into the floor before a step", 3.0, step=(2.5, np.array([0.0, 1.0, -1.0, 0.0])),
+                    push=(0.2, 0.5, np.array([0.0, 0.0, 40.0])))
+    r = simulate(slam)
+    assert r.status is SimStatus.CRASHED and r.t[-1] < 2.5 and r.metrics["overshoot_pct"] is None
+
 def test_one_rk4_step_per_control_period_is_as_accurate_as_1_ms():
     # the default step without a motor lag: the inputs are held over the control period
     fine, default = simulate("sidestep", dt=0.001, seconds=3.0), simulate("sidestep", seconds=3.0)

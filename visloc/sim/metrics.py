@@ -122,7 +122,7 @@ def run_metrics(sc: Scenario, t: FloatArray, states: FloatArray, estimates: Floa
     -------
     dict
         ``settling_time_s`` (s, or None), ``overshoot_pct`` (% of the step; None without a
-        step), ``position_rms_m``, ``max_error_m`` (the largest distance from the set point
+        step or before it), ``position_rms_m``, ``max_error_m`` (the largest distance from the set point
         or the moving reference), ``final_error_m``, ``height_dip_m``, ``estimate_rms_m``
         (m), ``max_tilt_deg`` (largest roll or pitch, degrees), ``saturated_fraction`` (0-1)
         and ``realtime_factor`` (simulated over wall-clock seconds; inf when ``wall`` is 0).
@@ -133,7 +133,7 @@ def run_metrics(sc: Scenario, t: FloatArray, states: FloatArray, estimates: Floa
     after = t >= t0
     settle = settling_time(t, dist, sc.band, t0)
     overshoot = None
-    if sc.step is not None:
+    if sc.step is not None and after.any():  # None when the run ended before the step
         start = sc.start_setpoint[:3]
         delta = sc.step[1][:3] - start
         size = float(np.linalg.norm(delta))

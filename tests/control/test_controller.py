@@ -147,3 +147,14 @@ def test_bad_arguments():
         Controller(max_tilt=0.0)
     with pytest.raises(TypeError, match="gains"):
         Controller(gains={"roll": 1.0})
+
+
+def test_wrap_angle_never_returns_pi():
+    # (a + pi) % 2 pi rounds to 2 pi just below -pi: the result was +pi, outside [-pi, pi)
+    from visloc.estimation._fused import wrap_angle as wrap_scalar
+
+    below = np.nextafter(-math.pi, -np.inf)
+    for f in (wrap_angle, wrap_scalar):
+        assert f(below) == -math.pi and f(math.pi) == -math.pi and f(0.25) == 0.25
+    out = wrap_angle(np.array([below, 7.0, -0.5]))
+    assert out[0] == -math.pi and out[1] == pytest.approx(7.0 - 2 * math.pi) and out[2] == -0.5

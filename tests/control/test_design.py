@@ -128,3 +128,21 @@ def test_save_bode_png(tmp_path, gains):
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     with pytest.raises(ValueError, match="loops"):
         save_bode_png(out, loops="attitude")
+
+
+def test_lqr_weights_without_a_solution_are_a_value_error():
+    # scipy's LinAlgError and its own ValueError used to leak out unnamed
+    with pytest.raises(ValueError, match="q, r: no LQR gains"):
+        lqr_gains(ARDRONE2, q=[-1.0] * 16)
+    with pytest.raises(ValueError, match="q, r: no LQR gains"):
+        lqr_gains(ARDRONE2, r=[0.0, 1.0, 1.0, 1.0])
+    with pytest.raises(ValueError, match="finite"):
+        lqr_gains(ARDRONE2, q=[np.nan] * 16)
+
+
+def test_gains_to_dict_is_json_ready_with_numpy_specs():
+    import json
+
+    g = design_gains(ARDRONE2, ControlSpecs(height=LoopSpec(np.float32(3.0), 60.0, 0.1)))
+    d = json.loads(json.dumps(g.to_dict()))  # a float32 gain used to stop json
+    assert d["height"]["ki"] == pytest.approx(float(g.loop("height").ki))

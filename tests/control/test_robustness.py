@@ -138,3 +138,14 @@ def test_the_tracking_loop_at_a_trajectory_tilt(gains):
     assert vertex_stability(tilted)[0]
     with pytest.raises(ValueError, match="roll"):
         linearize_numerical(ARDRONE2, roll=1.3)
+
+
+def test_motors_without_spread_are_robust_at_every_sigma():
+    # max_sigma is inf: the bisection used to pass inf on to closed_loop_vertices
+    import dataclasses
+    import math
+
+    exact = dataclasses.replace(P, c_std=0.0, d_std=0.0)
+    assert max_sigma(exact) == math.inf and largest_sigma(params=exact) == math.inf
+    with pytest.raises(ValueError, match="N, n >= 1"):
+        vertex_stability(np.zeros((1, 0, 0)))

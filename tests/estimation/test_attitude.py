@@ -228,3 +228,10 @@ def test_complementary_reset_starts_the_fast_start_again():
     assert f.elapsed == 0.0
     f.update([0.0, 0.0, 0.0], acc, 0.01)  # at 1 Hz, not 0.01 Hz
     assert f.roll == pytest.approx(0.2 * math.exp(-2 * math.pi * 1.0 * 0.01))
+
+
+def test_gyro_integrator_skips_a_step_that_overflows():
+    # a huge rate times dt used to give NaN angles for good, uncounted
+    g = GyroIntegrator()
+    assert g.update([1e308, 0.0, 0.0], 10.0) == (0.0, 0.0, 0.0) and g.skipped == 1
+    assert g.update([0.1, 0.0, 0.0], 1.0) == pytest.approx((0.1, 0.0, 0.0))

@@ -375,3 +375,16 @@ def test_a_bad_measurement_leaves_the_clock_alone(kind):
         np.testing.assert_array_equal(kf.P, P)
     assert len(kf.history) == 1
     assert update((0.0, 0.0), std=0.01, t=2.0) and kf.t == 2.0
+
+
+def test_a_refused_predict_counts_no_dropped_input():
+    # skipped["accel_input"] used to count inputs of calls that then raised
+    kf = PositionVelocityKF(2, model="cv")
+    kf.predict(0.0)
+    with pytest.raises(ValueError, match="out-of-order"):
+        kf.predict(-1.0, accel=[np.nan, 0.0])
+    with pytest.raises(ValueError, match="accel_std"):
+        kf.predict(1.0, accel=[np.nan, 0.0], accel_std=-1.0)
+    assert kf.skipped["accel_input"] == 0 and kf.t == 0.0
+    kf.predict(1.0, accel=[np.nan, 0.0])
+    assert kf.skipped["accel_input"] == 1 and kf.t == 1.0

@@ -73,3 +73,15 @@ def test_bad_arguments():
         global_motion("flow")
     with pytest.raises(ValueError, match="method"):
         global_motion(_synthetic_field(0.0, (0, 0)), method="ransac")
+
+
+def test_similarity_fit_needs_one_iteration():
+    # iterations=0 used to end in an UnboundLocalError
+    from visloc.flow.motion import similarity_fit
+
+    a, b = moved(dx=2.0)
+    field = block_flow(a, b)
+    assert similarity_fit(field, iterations=1).inliers > 0
+    for bad in (0, -1, 1.5, True):
+        with pytest.raises(ValueError, match="iterations"):
+            similarity_fit(field, iterations=bad)

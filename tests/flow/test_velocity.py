@@ -115,3 +115,13 @@ def test_tracking_works_with_a_camera_without_size():
     assert any(gv.motion.method.endswith("+tracked") for gv in out)
     for gv in out:
         assert gv.quality > 0.3 and np.allclose(gv.v, (0.6, 0.0), atol=0.03)
+
+
+def test_a_first_frame_too_small_is_refused_and_the_stream_stays_usable():
+    # it used to become the stream's first frame: every later frame then failed on its size
+    a, b = moved(dx=1.0)
+    ego = EgoMotion(CAM, height=1.0, fps=60.0)
+    with pytest.raises(ValueError, match="16 x 16"):
+        ego.update(a[:10, :10])
+    assert ego.frame_shape is None
+    assert ego.update(a) is None and ego.update(b) is not None

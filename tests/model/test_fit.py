@@ -110,3 +110,9 @@ def test_table_e_1_mean_and_std_from_its_rows(table, printed_decimals):
 def test_mean_std_checks_its_input():
     with pytest.raises(ValueError, match="values"):
         mean_std([1.0])
+
+
+def test_no_thrust_rows_is_a_clear_error():
+    # (0, N) thrust used to fail in np.concatenate or mislabel the torque rows as thrust
+    with pytest.raises(ValueError, match="at least one motor"):
+        fit_propulsion(REPORT_PWM_GRID, np.zeros((0, REPORT_PWM_GRID.size)))

@@ -130,3 +130,10 @@ def test_hover_pwm_is_about_66_9_percent():
     assert hover_pwm(ARDRONE2, mass=0.502) > h
     with pytest.raises(ValueError, match="mass"):
         hover_pwm(ARDRONE2, mass=0.0)
+
+
+def test_a_bool_pwm_max_is_refused():
+    # True passed the numbers.Real check and gave a boolean pwm array
+    u = np.array([P.mass * P.g, 0.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match="pwm_max"):
+        pwm_from_inputs(u, P, pwm_max=True)

@@ -55,3 +55,11 @@ def test_yaw_torque_and_bad_input():
         stand_derivatives(np.zeros(6), np.zeros(4), P, l=math.nan)
     with pytest.raises(ValueError, match="state"):
         stand_derivatives(np.zeros(12), np.zeros(4), P, l=L)
+
+
+def test_numpy_scalar_joint_distances_are_taken():
+    # l was checked against int and float only: np.float32(0.1) was "not a finite distance"
+    for l in (np.float32(0.1), np.float64(0.1), np.int64(1)):
+        np.testing.assert_allclose(stand_inertia(ARDRONE2, l), stand_inertia(ARDRONE2, float(l)))
+    with pytest.raises(ValueError, match="l:"):
+        stand_inertia(ARDRONE2, True)

@@ -308,3 +308,17 @@ def test_markers_in_view_names_a_bad_size_or_pose_and_takes_numpy_margins():
     for margin in (np.nan, True, "1"):
         with pytest.raises(ValueError, match="margin"):
             markers_in_view(g, CAM, pose, margin=margin)
+
+
+def test_an_id_with_a_fraction_is_in_no_map():
+    # int() used to truncate: corners_of(0.5) was marker 0, first_id=1.5 built ids 1, 2
+    m = GridMap(2, 2, 0.1, 0.05)
+    np.testing.assert_array_equal(m.corners_of(1.0), m.corners_of(1))
+    for bad in (0.5, True, "1"):
+        with pytest.raises(KeyError):
+            m.corners_of(bad)
+        with pytest.raises(KeyError):
+            m.marker_pose(bad)
+    with pytest.raises(ValueError, match="first_id"):
+        GridMap(1, 2, 0.1, 0.0, first_id=1.5)
+    assert GridMap(1, 2, 0.1, 0.0, first_id=2.0).ids.tolist() == [2, 3]

@@ -245,3 +245,13 @@ def test_extra_nodes_are_checked_before_the_file_is_opened(tmp_path: Path) -> No
     with pytest.raises(ValueError, match="node name"):
         cam.to_file(tmp_path / "bad.yml", extra={"2 views": 1.0})
     assert not (tmp_path / "bad.yml").exists()  # nothing half-written
+
+
+def test_no_points_give_no_points_with_distortion_too():
+    # OpenCV returns None for an empty point set: normalize / project used to fail on .reshape
+    K = np.array([[500.0, 0.0, 320.0], [0.0, 500.0, 240.0], [0.0, 0.0, 1.0]])
+    for cam in (Camera(K), Camera(K, dist=[-0.2, 0.05, 0.0, 0.0, 0.0]),
+                Camera(K, dist=[0.01, 0.0, 0.0, 0.0], model="fisheye")):
+        for out in (cam.normalize(np.zeros((0, 2))), cam.undistort_points(np.zeros((0, 2))),
+                    cam.project(np.zeros((0, 3)))):
+            assert out.shape == (0, 2)

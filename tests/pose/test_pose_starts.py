@@ -53,6 +53,18 @@ def test_euler_convention_is_zyx() -> None:
     assert euler_to_matrix(np.zeros((2, 5, 6))).shape == (2, 5, 3, 3)
 
 
+def test_matrix_to_euler_at_gimbal_lock_rebuilds_the_matrix() -> None:
+    # cos(theta) exactly 0: the yaw used to be dropped (atan2(0, 0)); now phi = 0 as scipy has it
+    from visloc.pose.rotations import matrix_to_euler_list
+
+    c, s = math.cos(0.5), math.sin(0.5)
+    for sign in (1.0, -1.0):
+        R = np.array([[0.0, -s, sign * c], [0.0, c, sign * s], [-sign, 0.0, 0.0]])  # Rz(0.5) Ry(sign pi/2)
+        for e in (matrix_to_euler(R), matrix_to_euler(np.stack([R, np.eye(3)]))[0], matrix_to_euler_list(R[None])[0]):
+            np.testing.assert_allclose(e, [0.0, sign * math.pi / 2, 0.5], atol=1e-15)
+            assert rotation_angle(euler_to_matrix(e).T @ R) < 1e-12
+
+
 def test_rotation_angle_is_accurate_near_zero_and_pi() -> None:
     for angle in (0.0, 1e-9, 1e-4, 1.0, math.pi - 1e-7, math.pi):
         R = Rotation.from_rotvec(angle * np.array([0.6, 0.0, 0.8])).as_matrix()
@@ -201,3 +213,15 @@ def test_refine_params_on_a_3d_point_set() -> None:
         refine_params(start, X[:, :2], xy)
     with pytest.raises(ValueError, match="xy"):
         refine_params(start, X, xy[:5])
+
+
+def test_refine_params_max_iter_must_be_a_whole_number(poses: types.SimpleNamespace) -> None:
+    # 1.5 used to be truncated to 1, True taken as 1, and -1 failed on another argument's shape
+    R, t = poses.marker_pose(0.2, 0.3, 0.4, np.array([0.05, -0.04, 0.8]))
+    xy = normalized_corners(R, t)
+    start = yaw_seed_start(xy, L)
+    np.testing.assert_array_equal(refine_params(start, OBJ, xy, fx=600.0, fy=600.0, max_iter=5.0)[0],
+                                  refine_params(start, OBJ, xy, fx=600.0, fy=600.0, max_iter=5)[0])
+    for bad in (1.5, True, -1, "3"):
+        with pytest.raises(ValueError, match="max_iter"):
+            refine_params(start, OBJ, xy, fx=600.0, fy=600.0, max_iter=bad)

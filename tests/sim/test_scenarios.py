@@ -107,6 +107,20 @@ def test_a_run_that_ends_before_its_step_has_no_step_metrics():
                     push=(0.2, 0.5, np.array([0.0, 0.0, 40.0])))
     r = simulate(slam)
     assert r.status is SimStatus.CRASHED and r.t[-1] < 2.5 and r.metrics["overshoot_pct"] is None
+    assert not any(k.startswith("linear_") for k in r.metrics)  # the linear model's step never came either
+
+
+def test_a_heading_step_has_no_position_overshoot():
+    # the step moves the heading alone: nothing to overshoot (it divided by a zero travel)
+    yaw = Scenario("yaw", "a heading step", 2.0, step=(0.5, [0.0, 0.0, -1.0, 0.5]))  # a list: kept as an array
+    assert isinstance(yaw.step[1], np.ndarray)
+    r = simulate(yaw)
+    assert r.status is SimStatus.SETTLED and abs(r.state[-1, 8] - 0.5) < 0.05
+    assert r.metrics["overshoot_pct"] is None and r.metrics["linear_overshoot_pct"] is None
+    with pytest.raises(ValueError, match="step set point"):
+        Scenario("bad", "", 1.0, step=(0.5, [0.0, 1.0]))
+    with pytest.raises(ValueError, match="push"):
+        Scenario("bad", "", 1.0, push=(0.5, [0.0, 1.0, 0.0]))
 
 def test_one_rk4_step_per_control_period_is_as_accurate_as_1_ms():
     # the default step without a motor lag: the inputs are held over the control period

@@ -53,3 +53,23 @@ def test_vision_estimator_takes_the_ultrasound_height():
     assert not est.ultrasound(0.0, 0.0)  # blind zone
     assert not est.ultrasound(0.0, ultrasound_reading(2.0))  # far off the prediction: gated
     assert est.state[2] == z
+
+
+def test_vision_estimator_imu_refuses_a_bad_sample_without_changing():
+    # the clock, the body rates and the attitude used to move before the filter raised
+    from visloc.pose import GridMap
+    from visloc.sim import BottomCamera, VisionEstimator
+
+    est = VisionEstimator(BottomCamera(GridMap(4, 4, 0.1, 0.05), "DICT_4X4_50"), np.r_[0.0, 0.0, -1.0, np.zeros(9)])
+    level = np.array([0.0, 0.0, -9.81])
+    est.imu(0.02, np.zeros(3), level)
+    before = est.state.copy()
+    for t, gyro, accel, match in ((0.01, [1.0, 0.0, 0.0], level, "out-of-order"),
+                                  (0.03, [1.0, 0.0, 0.0], [0.0, -9.81], "accel"),
+                                  (0.03, [np.nan, 0.0, 0.0], level, "gyro")):
+        with pytest.raises(ValueError, match=match):
+            est.imu(t, np.array(gyro), np.asarray(accel))
+        np.testing.assert_array_equal(est.state, before)
+        assert est.kf.t == 0.02
+    est.imu(0.03, [0.1, 0.0, 0.0], [0.0, 0.0, -9.81])  # lists are samples too
+    assert est.state[6] == pytest.approx(0.001) and est.state[9] == 0.1

@@ -63,8 +63,10 @@ def test_motor_lag_approaches_the_command_exponentially():
 
 def test_pwm_is_saturated_and_a_push_moves_the_body():
     v = Vehicle(state=_at())
-    v.step(np.array([150.0, -5.0, 50.0, 50.0]), 0.001)
+    out = v.step(np.array([150.0, -5.0, 50.0, 50.0]), 0.001)
+    assert isinstance(out, np.ndarray) and out.shape == (12,) and np.array_equal(out, v.state)  # was a list
     np.testing.assert_allclose(v.pwm, [100.0, 0.0, 50.0, 50.0])
+    np.testing.assert_array_equal(v.acceleration([0.0, 0.0, 0.0]), v.acceleration())  # a list force
     w = Vehicle(state=_at())
     w.trim(np.full(4, hover_pwm(P)))
     for _ in range(100):

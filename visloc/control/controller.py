@@ -23,20 +23,23 @@ from visloc.types import FloatArray
 _POSITION_COLUMNS = np.r_[0:6, 12:16]  # x_P..w_P and the integrals: the "set-point" part
 
 
-def wrap_angle(angle: float) -> float:
+def wrap_angle(angle: float | FloatArray) -> float | FloatArray:
     """``angle`` wrapped to [-pi, pi).
 
     Parameters
     ----------
-    angle : float
-        Angle, rad.
+    angle : float or ndarray
+        Angle(s), rad (an array is wrapped elementwise).
 
     Returns
     -------
-    float
-        The same angle modulo ``2 pi``, rad, in [-pi, pi).
+    float or ndarray
+        The same angle(s) modulo ``2 pi``, rad, in [-pi, pi).
     """
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+    wrapped = (angle + math.pi) % (2.0 * math.pi) - math.pi
+    if isinstance(wrapped, np.ndarray):
+        return np.where(wrapped >= math.pi, wrapped - 2.0 * math.pi, wrapped)
+    return wrapped - 2.0 * math.pi if wrapped >= math.pi else wrapped  # the modulo can round up to 2 pi
 
 
 def _zone(value: tuple[float, float], name: str) -> FloatArray:

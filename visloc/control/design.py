@@ -216,7 +216,7 @@ class ControllerGains:
         out = {}
         for name in LOOPS:
             g = self.loop(name)
-            out[name] = {"kp": g.kp, "kd": g.kd, "ki": g.ki}
+            out[name] = {"kp": float(g.kp), "kd": float(g.kd), "ki": float(g.ki)}  # numpy scalars too
         return out
 
 
@@ -438,7 +438,8 @@ def lqr_gains(
     Raises
     ------
     ValueError
-        ``q`` or ``r`` of the wrong shape.
+        ``q`` or ``r`` of the wrong shape or not finite, or weights for which the Riccati
+        equation has no stabilising solution (e.g. a negative ``q`` or a singular ``r``).
     TypeError
         ``params`` is not an :class:`ARDrone2Params`.
     """
@@ -454,5 +455,10 @@ def lqr_gains(
         raise ValueError(f"q: expected shape ({n},) or ({n}, {n}), got {qm.shape}")
     if rm.shape != (4, 4):
         raise ValueError(f"r: expected shape (4,) or (4, 4), got {rm.shape}")
-    x = solve_continuous_are(a, b, qm, rm)
-    return np.linalg.solve(rm, b.T @ x)
+    if not (np.isfinite(qm).all() and np.isfinite(rm).all()):
+        raise ValueError("q, r: expected finite weights")
+    try:
+        x = solve_continuous_are(a, b, qm, rm)
+        return np.linalg.solve(rm, b.T @ x)
+    except (np.linalg.LinAlgError, ValueError) as exc:  # scipy's and numpy's own words, named here
+        raise ValueError(f"q, r: no LQR gains for these weights ({exc})") from None

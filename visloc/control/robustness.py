@@ -355,7 +355,8 @@ def largest_sigma(
     -------
     float
         The bracket's lower end: 0 when the test fails even at ``n = 0``; just below
-        :func:`max_sigma` when it passes up to the point where a coefficient reaches 0. The
+        :func:`max_sigma` when it passes up to the point where a coefficient reaches 0
+        (``inf`` when ``params`` has no spread, ``c_std = d_std = 0``, and the test passes). The
         Lyapunov test is monotone in ``n`` (the polytopes are nested); the vertex check need
         not be, so its answer is the edge bisection found, not a proof for every smaller n.
 
@@ -390,6 +391,8 @@ def largest_sigma(
         return common_lyapunov(mats).status == "feasible"
 
     lo, hi = 0.0, max_sigma(params) * (1.0 - 1e-9)
+    if math.isinf(hi):  # no spread in c or d: every n gives the nominal motors
+        return math.inf if passes(lo) else 0.0
     if test == "lyapunov":  # a common P needs stable vertices: start below the vertex edge
         hi = min(hi, largest_sigma("vertex", params=params, gains=g, arm=arm,
                                    integral=integral, tol=step) + step)
@@ -453,8 +456,8 @@ def _as_stack(matrices: FloatArray) -> FloatArray:
         m = np.asarray(matrices, dtype=float)
     except (TypeError, ValueError) as exc:
         raise TypeError(f"matrices: expected real numbers, got {type(matrices).__name__}") from exc
-    if m.ndim != 3 or m.shape[1] != m.shape[2] or m.shape[0] == 0:
-        raise ValueError(f"matrices: expected shape (N, n, n) with N >= 1, got {m.shape}")
+    if m.ndim != 3 or m.shape[1] != m.shape[2] or m.shape[0] == 0 or m.shape[1] == 0:
+        raise ValueError(f"matrices: expected shape (N, n, n) with N, n >= 1, got {m.shape}")
     if not np.all(np.isfinite(m)):
         raise ValueError("matrices: expected finite values")
     return m

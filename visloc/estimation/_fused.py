@@ -26,7 +26,8 @@ def wrap_angle(angle: float) -> float:
     """Wrap an angle (rad) into ``[-pi, pi)`` (returned unchanged when already inside)."""
     if -math.pi <= angle < math.pi:
         return angle
-    return (angle + math.pi) % _TWO_PI - math.pi
+    wrapped = (angle + math.pi) % _TWO_PI - math.pi
+    return wrapped - _TWO_PI if wrapped >= math.pi else wrapped  # the modulo can round up to 2 pi
 
 
 def _normalise(roll: float, pitch: float, yaw: float = 0.0) -> tuple[float, float, float]:

@@ -173,10 +173,13 @@ class GyroIntegrator:
             self.skipped += 1
             return
         st = math.sin(self.pitch)
-        self.roll, self.pitch, self.yaw = _normalise(  # report eq. (3.3), Q from eq. (2.7)
-            self.roll + dt * (p + (sp * q + cp * r) * st / ct),
-            self.pitch + dt * (cp * q - sp * r),
-            self.yaw + dt * (sp * q + cp * r) / ct)
+        roll = self.roll + dt * (p + (sp * q + cp * r) * st / ct)  # report eq. (3.3), Q from eq. (2.7)
+        pitch = self.pitch + dt * (cp * q - sp * r)
+        yaw = self.yaw + dt * (sp * q + cp * r) / ct
+        if not (math.isfinite(roll) and math.isfinite(pitch) and math.isfinite(yaw)):  # rates beyond float's range
+            self.skipped += 1
+            return
+        self.roll, self.pitch, self.yaw = _normalise(roll, pitch, yaw)
 
     def update(self, gyro: object, dt: float) -> tuple[float, float, float]:
         """Integrate one gyro sample over ``dt`` seconds.
@@ -184,8 +187,9 @@ class GyroIntegrator:
         Parameters
         ----------
         gyro : array_like (3,)
-            Body rates ``(p, q, r)``, rad/s. A non-finite reading, or a sample at gimbal lock
-            (``|cos(pitch)| < 1e-9``), is skipped (the angles held) and counted in ``skipped``.
+            Body rates ``(p, q, r)``, rad/s. A non-finite reading, one whose step overflows,
+            or a sample at gimbal lock (``|cos(pitch)| < 1e-9``), is skipped (the angles held)
+            and counted in ``skipped``.
         dt : float
             Time since the previous sample, s, > 0.
 

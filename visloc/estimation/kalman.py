@@ -412,17 +412,17 @@ class PositionVelocityKF:
                 raise ValueError("accel input needs model='cv'; with model='ca' use "
                                  "update_acceleration")
             u = as_float_array(accel, "accel", (self.dims,))
-            if not np.isfinite(u).all():
-                self.skipped["accel_input"] += 1
-                u = None
         std = None if accel_std is None else check_real(accel_std, "accel_std", positive=True)
+        if self.t is not None and t < self.t:
+            raise ValueError(f"out-of-order timestamp: t={t!r} is earlier than the last time "
+                             f"{self.t!r}")
+        if u is not None and not np.isfinite(u).all():  # counted once the call is known to stand
+            self.skipped["accel_input"] += 1
+            u = None
         if self.t is None:
             self.t = t
             self._record(t, None)
             return
-        if t < self.t:
-            raise ValueError(f"out-of-order timestamp: t={t!r} is earlier than the last time "
-                             f"{self.t!r}")
         dt = t - self.t
         if dt == 0.0:
             return

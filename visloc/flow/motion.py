@@ -9,6 +9,7 @@ a translation (the similarity fit, which also has a scale).
 from __future__ import annotations
 
 import math
+import numbers
 
 import numpy as np
 from numpy.typing import NDArray
@@ -65,7 +66,14 @@ def similarity_fit(field: FlowField, *, min_confidence: float = 0.2, iterations:
         ``method`` ``"similarity"``; translation at the image centre, px; ``residual_rms``
         over the kept blocks, px; ``inliers`` the kept blocks (0, with zero motion and a NaN
         residual, when fewer than 3 blocks are usable).
+
+    Raises
+    ------
+    ValueError
+        ``iterations`` not an integer >= 1.
     """
+    if isinstance(iterations, bool) or not isinstance(iterations, numbers.Integral) or iterations < 1:
+        raise ValueError(f"iterations: expected an integer >= 1, got {iterations!r}")
     w, h = field.image_size
     c0 = ((w - 1) / 2.0, (h - 1) / 2.0)
     use = field.confidence >= min_confidence

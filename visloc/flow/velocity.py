@@ -335,6 +335,8 @@ class EgoMotion:
         from visloc.images import as_gray
 
         img = as_gray(image, name="image")
+        if min(img.shape) < 16:  # as block_flow would refuse it, before it becomes the stream's first frame
+            raise ValueError(f"image must be at least 16 x 16 pixels, got {img.shape[::-1]} (W, H)")
         if self._prev is None:
             self._prev = img
             self.track.append((0.0, 0.0, 0.0, 0.0))

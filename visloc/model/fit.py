@@ -122,6 +122,8 @@ def fit_propulsion(
         raise ValueError("pwm: expected finite commands > 0 % (the model holds for pwm > 0)")
     n = p.size
     t = _matrix(thrust, "thrust", n)
+    if not len(t):
+        raise ValueError(f"thrust: expected at least one motor's measurements, got shape {t.shape}")
     q = np.empty((0, n)) if torque is None else _matrix(torque, "torque", n)
     if weights is None:
         if n != REPORT_WEIGHTS.size:

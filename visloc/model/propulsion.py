@@ -289,7 +289,7 @@ def pwm_from_inputs(
     """
     check_params(params)
     u = _as_vector(u, "u", 4)
-    if not (isinstance(pwm_max, numbers.Real) and 0 < pwm_max < math.inf):
+    if isinstance(pwm_max, bool) or not (isinstance(pwm_max, numbers.Real) and 0 < pwm_max < math.inf):
         raise ValueError(f"pwm_max: expected a finite value > 0 %, got {pwm_max!r}")
     g = _mixer(params, gamma)
     try:

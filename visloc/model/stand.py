@@ -22,6 +22,7 @@ equals (C.6) for ``theta = 0``. The moments of inertia about the joint are ``I +
 from __future__ import annotations
 
 import math
+import numbers
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -37,7 +38,7 @@ STAND_STATE_NAMES: tuple[str, ...] = ("phi", "theta", "psi", "p", "q", "r")
 
 
 def _arm(l: float) -> float:
-    if isinstance(l, bool) or not isinstance(l, (int, float)) or not math.isfinite(l):
+    if isinstance(l, bool) or not isinstance(l, numbers.Real) or not math.isfinite(l):  # numpy scalars too
         raise ValueError(f"l: expected a finite joint distance in m, got {l!r}")
     return float(l)
 

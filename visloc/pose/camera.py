@@ -393,6 +393,8 @@ class Camera:
         p = _as_points(points, 2, "points")
         if not self.has_distortion:
             return (p - self.K[:2, 2]) / self.K[[0, 1], [0, 1]]
+        if not len(p):  # OpenCV returns None for no points
+            return np.zeros((0, 2))
         src = p.reshape(-1, 1, 2)
         if self.model == "fisheye":
             out = cv2.fisheye.undistortPoints(src, self.K, self.dist, criteria=_UNDISTORT_CRITERIA)
@@ -455,6 +457,8 @@ class Camera:
         if not self.has_distortion:
             xy = p[:, :2] / p[:, 2:3]
             return xy * self.K[[0, 1], [0, 1]] + self.K[:2, 2]
+        if not len(p):  # OpenCV returns None for no points
+            return np.zeros((0, 2))
         zero = np.zeros(3)
         if self.model == "fisheye":
             out, _ = cv2.fisheye.projectPoints(p.reshape(-1, 1, 3), zero, zero, self.K, self.dist)

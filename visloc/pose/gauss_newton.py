@@ -16,6 +16,7 @@ built, and in numpy otherwise.
 from __future__ import annotations
 
 import math
+import numbers
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -342,6 +343,8 @@ def refine_params(
         raise ValueError(f"object_points must have shape (N, 3), N >= 3, got {X.shape}")
     if uv.shape != (X.shape[0], 2):
         raise ValueError(f"xy must have shape ({X.shape[0]}, 2), got {uv.shape}")
+    if isinstance(max_iter, bool) or not isinstance(max_iter, numbers.Real) or max_iter < 0 or int(max_iter) != max_iter:
+        raise ValueError(f"max_iter must be a whole number >= 0, got {max_iter!r}")
     f = np.array([[fx], [fy]], dtype=np.float64)
     x, sse, _ = levenberg_marquardt(x, X.T.copy(), uv.T.copy(), f, max_iter=int(max_iter))
     if single:

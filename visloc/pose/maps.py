@@ -159,9 +159,9 @@ class MarkerMap:
         Raises
         ------
         KeyError
-            If ``marker_id`` is not in the map.
+            If ``marker_id`` is not in the map (an id with a fraction never is).
         """
-        return self.corners[int(marker_id)]
+        return self.corners[_map_key(marker_id)]
 
     def marker_pose(self, marker_id: int) -> Pose:
         """``T_map_marker``: the marker's own frame (centre, x right, y up, z out) in the map.
@@ -181,9 +181,9 @@ class MarkerMap:
         Raises
         ------
         KeyError
-            If ``marker_id`` is not in the map.
+            If ``marker_id`` is not in the map (an id with a fraction never is).
         """
-        return self._frames[int(marker_id)]
+        return self._frames[_map_key(marker_id)]
 
     def to_file(self, path: str | Path) -> None:
         """Save as OpenCV FileStorage YAML (see the module docstring).
@@ -262,6 +262,15 @@ class MarkerMap:
         return cls.from_list(items, dictionary)
 
 
+def _map_key(value: object) -> int:
+    """A map's key for the id ``value``; KeyError for what no map holds (a fraction, a bool,
+    not a number), as for an id the map lacks."""
+    try:
+        return marker_id(value, "marker_id")
+    except (TypeError, ValueError):
+        raise KeyError(value) from None
+
+
 def GridMap(rows: int, cols: int, marker_length: float, spacing: float, *, first_id: int = 0,
             dictionary: str | None = None) -> MarkerMap:
     """A ``rows x cols`` grid of square markers in the map's z = 0 plane.
@@ -294,7 +303,7 @@ def GridMap(rows: int, cols: int, marker_length: float, spacing: float, *, first
     ------
     ValueError
         ``rows`` or ``cols`` not an integer >= 1, ``marker_length`` not finite and > 0,
-        ``spacing`` not finite and >= 0, ``first_id`` < 0, or ``dictionary`` neither None nor a
+        ``spacing`` not finite and >= 0, ``first_id`` < 0 or with a fraction, or ``dictionary`` neither None nor a
         non-empty str.
     """
     for name, v in (("rows", rows), ("cols", cols)):
@@ -304,7 +313,8 @@ def GridMap(rows: int, cols: int, marker_length: float, spacing: float, *, first
         raise ValueError(f"marker_length must be positive and finite, got {marker_length!r}")
     if not (0 <= float(spacing) < float("inf")):
         raise ValueError(f"spacing must be >= 0 and finite, got {spacing!r}")
-    if int(first_id) < 0:
+    first_id = marker_id(first_id, "first_id")
+    if first_id < 0:
         raise ValueError(f"first_id must be >= 0, got {first_id!r}")
     L, pitch = float(marker_length), float(marker_length) + float(spacing)
     square = np.array([[0, 0, 0], [L, 0, 0], [L, -L, 0], [0, -L, 0]], dtype=np.float64)

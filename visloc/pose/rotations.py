@@ -59,12 +59,18 @@ def matrix_to_euler(R: ArrayLike) -> FloatArray:
     -------
     ndarray (..., 3)
         ``[phi, theta, psi]``, rad: ``theta`` in [-pi/2, pi/2] and ``phi, psi`` in (-pi, pi],
-        the branch of ``Pose.euler_zyx`` (scipy's ``as_euler("ZYX")``).
+        the branch of ``Pose.euler_zyx`` (scipy's ``as_euler("ZYX")``); where ``cos(theta)``
+        is exactly 0 (gimbal lock) only ``psi - phi`` or ``psi + phi`` is defined, and
+        ``phi`` is 0, as scipy chooses.
     """
     R = np.asarray(R, dtype=np.float64)
     theta = np.arcsin(np.clip(-R[..., 2, 0], -1.0, 1.0))
     phi = np.arctan2(R[..., 2, 1], R[..., 2, 2])
     psi = np.arctan2(R[..., 1, 0], R[..., 0, 0])
+    lock = (R[..., 0, 0] == 0.0) & (R[..., 1, 0] == 0.0)  # cos(theta) exactly 0: phi and psi share one angle
+    if np.any(lock):  # phi = 0 and psi the whole of it (scipy's choice)
+        phi = np.where(lock, 0.0, phi)
+        psi = np.where(lock, np.arctan2(-R[..., 0, 1], R[..., 1, 1]), psi)
     return np.stack([phi, theta, psi], axis=-1)
 
 
@@ -82,9 +88,12 @@ def matrix_to_euler_list(R: FloatArray) -> list[list[float]]:
         ``[phi, theta, psi]`` of each matrix, rad, on :func:`matrix_to_euler`'s branch.
     """
     out = []
-    for (r00, _, _), (r10, _, _), (r20, r21, r22) in np.asarray(R, dtype=np.float64).tolist():
+    for (r00, r01, _), (r10, r11, _), (r20, r21, r22) in np.asarray(R, dtype=np.float64).tolist():
         theta = math.asin(min(max(-r20, -1.0), 1.0))
-        out.append([math.atan2(r21, r22), theta, math.atan2(r10, r00)])
+        if r00 == 0.0 and r10 == 0.0:  # cos(theta) exactly 0: as matrix_to_euler
+            out.append([0.0, theta, math.atan2(-r01, r11)])
+        else:
+            out.append([math.atan2(r21, r22), theta, math.atan2(r10, r00)])
     return out
 
 

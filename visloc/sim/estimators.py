@@ -24,6 +24,7 @@ from numpy.typing import NDArray
 
 from visloc.control._checks import as_array, check_real
 from visloc.control.controller import wrap_angle
+from visloc.estimation._checks import as_float_array
 from visloc.estimation.fusion import MapFixFusion
 from visloc.estimation.height import ultrasound_height
 from visloc.markers.detector import MarkerDetector
@@ -151,17 +152,25 @@ class VisionEstimator:
 
         Raises
         ------
+        TypeError
+            ``t`` or a sample not real numbers.
         ValueError
-            ``t`` earlier than the filter's last time, or a sample of the wrong shape
-            (:meth:`visloc.estimation.fusion.MapFixFusion.predict`).
+            ``t`` not finite or earlier than the last sample's, ``gyro`` not 3 finite values,
+            ``accel`` not 3 values (a NaN in it drops the sample from the filter's prediction,
+            :meth:`visloc.estimation.PositionVelocityKF.predict`). Nothing changes then.
         """
+        t = check_real(t, "t")
+        rates = as_array(gyro, "gyro", (3,))  # a NaN rate would spoil the attitude for good
+        f = as_float_array(accel, "accel", (3,))
+        if self.kf.t is not None and (t < self._t or t < self.kf.t):
+            raise ValueError(f"out-of-order timestamp: t={t!r} is earlier than the last sample's {self._t!r}")
         dt = t - self._t
         self._t = t
         if dt > 0.0:
-            self.lam = self.lam + euler_rate_matrix(self.lam) @ gyro * dt  # report eq. (2.3)
-        self.omega = np.asarray(gyro, dtype=float)
+            self.lam = self.lam + euler_rate_matrix(self.lam) @ rates * dt  # report eq. (2.3)
+        self.omega = rates.copy()
         # x = F x + B a with a = R f + g, inertial NED (visloc.estimation.fusion)
-        self.fusion.predict(t, accel, rotation_matrix(self.lam), gravity=(0.0, 0.0, self.g), accel_std=self.accel_std)
+        self.fusion.predict(t, f, rotation_matrix(self.lam), gravity=(0.0, 0.0, self.g), accel_std=self.accel_std)
 
     def _visloc_fix(self, image: NDArray[np.uint8]) -> tuple[Pose, FloatArray | None] | None:
         expected = None if self._last_pose is None else markers_in_view(  # the map's markers in the last view

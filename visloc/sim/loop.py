@@ -92,8 +92,8 @@ class SimResult:
         ``settling_time_s``, ``overshoot_pct``, ``position_rms_m``, ``height_dip_m``,
         ``estimate_rms_m``, ``max_tilt_deg``, ``saturated_fraction``, ``realtime_factor``,
         and for vision runs ``camera_frames``, ``vision_fixes``, ``vision_misses``; for step
-        scenarios the linear model's ``linear_settling_time_s``, ``linear_overshoot_pct``,
-        ``linear_height_dip_m`` (see :func:`simulate`).
+        scenarios that reached their step the linear model's ``linear_settling_time_s``,
+        ``linear_overshoot_pct``, ``linear_height_dip_m`` (see :func:`simulate`).
     motors : dict
         The simulated motors' ``c`` and ``d`` (the controller uses the means).
     """
@@ -360,7 +360,8 @@ def fly(scenario: Scenario, vehicle: Vehicle, controller: Controller, estimator:
     if sensors is not None:
         metrics.update(camera_frames=sensors.frames, vision_fixes=estimator.fixes,  # type: ignore[union-attr]
                        vision_misses=estimator.misses)  # type: ignore[union-attr]
-    if sc.step is not None and sc.trajectory is None:  # the linear model's answer to the same set-point step
+    if sc.step is not None and sc.trajectory is None and records[0][-1] >= sc.step[0]:  # the linear model's answer
+        # to the same set-point step (none when the run ended before the step)
         metrics.update(step_metrics_linear(controller.gains, p, sc, duration))
     status, reason = ended if ended is not None else _ran_out(sc, metrics, duration)
     motors = {"c": [float(v) for v in vehicle.c], "d": [float(v) for v in vehicle.d]}

@@ -8,6 +8,7 @@ import math
 import numpy as np
 from scipy.linalg import expm
 
+from visloc.control._checks import as_array, check_real
 from visloc.control.design import ControllerGains, augmented_model
 from visloc.model.params import ARDrone2Params
 from visloc.sim.scenarios import Scenario
@@ -37,8 +38,8 @@ def settling_time(t: FloatArray, error: FloatArray, band: float, t0: float) -> f
         None when it is outside the band at the end or no sample is at or after ``t0``.
     """
     after = t >= t0
-    outside = after & (np.abs(error) > band)
-    if not np.any(after) or abs(error[-1]) > band:
+    outside = after & ~(np.abs(error) <= band)  # a NaN error is outside
+    if not np.any(after) or not abs(error[-1]) <= band:
         return None
     if not np.any(outside):
         return 0.0
@@ -56,7 +57,7 @@ def linear_step_response(gains: ControllerGains, params: ARDrone2Params, step: F
         The controller (``K`` with the integral states, :meth:`ControllerGains.K`).
     params : ARDrone2Params
         Vehicle parameters of the linear model (:func:`visloc.control.augmented_model`).
-    step : ndarray (4,)
+    step : array_like (4,)
         Set-point change ``[dx, dy, dz, dpsi]`` (m in the pilot-frame axes, rad): the error
         state starts at ``-step``.
     seconds : float
@@ -75,8 +76,17 @@ def linear_step_response(gains: ControllerGains, params: ARDrone2Params, step: F
     Raises
     ------
     TypeError
-        ``params`` is not an :class:`ARDrone2Params`.
+        ``params`` is not an :class:`ARDrone2Params`, ``gains`` not :class:`ControllerGains`,
+        or a number that is not real.
+    ValueError
+        ``step`` not 4 finite numbers; ``seconds`` not finite and >= 0; ``dt`` not finite
+        and > 0.
     """
+    if not isinstance(gains, ControllerGains):
+        raise TypeError(f"gains: expected ControllerGains, got {type(gains).__name__}")
+    step = as_array(step, "step", (4,))
+    seconds = check_real(seconds, "seconds", nonneg=True)
+    dt = check_real(dt, "dt", positive=True)
     a, b = augmented_model(params)
     a_cl = a - b @ gains.K(integral=True)  # report eq. (4.5): u = -K x
     x = np.zeros(16)
@@ -122,7 +132,7 @@ def run_metrics(sc: Scenario, t: FloatArray, states: FloatArray, estimates: Floa
     -------
     dict
         ``settling_time_s`` (s, or None), ``overshoot_pct`` (% of the step; None without a
-        step or before it), ``position_rms_m``, ``max_error_m`` (the largest distance from the set point
+        step, before it, or for a step that does not move the position), ``position_rms_m``, ``max_error_m`` (the largest distance from the set point
         or the moving reference), ``final_error_m``, ``height_dip_m``, ``estimate_rms_m``
         (m), ``max_tilt_deg`` (largest roll or pitch, degrees), ``saturated_fraction`` (0-1)
         and ``realtime_factor`` (simulated over wall-clock seconds; inf when ``wall`` is 0).
@@ -133,10 +143,10 @@ def run_metrics(sc: Scenario, t: FloatArray, states: FloatArray, estimates: Floa
     after = t >= t0
     settle = settling_time(t, dist, sc.band, t0)
     overshoot = None
-    if sc.step is not None and after.any():  # None when the run ended before the step
+    size = 0.0 if sc.step is None else float(np.linalg.norm(sc.step[1][:3] - sc.start_setpoint[:3]))
+    if size > 0.0 and after.any():  # None before the step, and for a step of the heading alone
         start = sc.start_setpoint[:3]
         delta = sc.step[1][:3] - start
-        size = float(np.linalg.norm(delta))
         travel = (states[after, :3] - start) @ (delta / size)
         overshoot = float(max(0.0, travel.max() - size) / size * 100.0)
     dip = float(np.max(err[after, 2])) if np.any(after) else 0.0  # NED: + is below
@@ -173,7 +183,8 @@ def step_metrics_linear(gains: ControllerGains, p: ARDrone2Params, sc: Scenario,
     Returns
     -------
     dict
-        ``linear_settling_time_s`` (s, or None), ``linear_overshoot_pct`` (% of the step) and
+        ``linear_settling_time_s`` (s, or None), ``linear_overshoot_pct`` (% of the step; None
+        for a step that does not move the position) and
         ``linear_height_dip_m`` (m).
 
     Raises
@@ -187,9 +198,12 @@ def step_metrics_linear(gains: ControllerGains, p: ARDrone2Params, sc: Scenario,
     t, pos = linear_step_response(gains, p, delta, max(seconds - sc.step[0], LINEAR_SECONDS))
     size = float(np.linalg.norm(delta[:3]))
     err = np.linalg.norm(pos - delta[:3], axis=1)
-    travel = pos @ (delta[:3] / size)
+    overshoot = None
+    if size > 0.0:  # a step of the heading alone has no travel to overshoot
+        travel = pos @ (delta[:3] / size)
+        overshoot = float(max(0.0, travel.max() - size) / size * 100.0)
     return {
         "linear_settling_time_s": settling_time(t, err, sc.band, 0.0),
-        "linear_overshoot_pct": float(max(0.0, travel.max() - size) / size * 100.0),
+        "linear_overshoot_pct": overshoot,
         "linear_height_dip_m": float(max(0.0, np.max(pos[:, 2] - delta[2]))),
     }

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from visloc.control._checks import as_array, check_real
 from visloc.control.trajectory import (
     Figure8Trajectory,
     MinJerkTrajectory,
@@ -45,6 +46,14 @@ class Scenario:
         A smooth reference (:mod:`visloc.control.trajectory`): the set point follows its
         position and the controller gets its velocity and acceleration (feed-forward);
         ``step`` then names where it ends.
+
+    Raises
+    ------
+    TypeError, ValueError
+        ``step`` not ``(time, 4 finite numbers)`` or ``push`` not ``(start, duration, 3 finite
+        numbers)``, with finite times (lists are taken: they are kept as float arrays);
+        ``seconds``, ``gust_std`` or ``band`` not finite, or ``seconds`` or ``band`` not > 0
+        or ``gust_std`` negative.
     """
 
     name: str
@@ -56,6 +65,22 @@ class Scenario:
     gust_std: float = 0.0
     band: float = 0.05
     trajectory: MinJerkTrajectory | Figure8Trajectory | None = None
+
+    def __post_init__(self) -> None:
+        check_real(self.seconds, "seconds", positive=True)
+        check_real(self.gust_std, "gust_std", nonneg=True)
+        check_real(self.band, "band", positive=True)
+        if self.step is not None:
+            if not isinstance(self.step, (tuple, list)) or len(self.step) != 2:
+                raise ValueError(f"step: expected (time, [x, y, z, psi]), got {self.step!r}")
+            step = (check_real(self.step[0], "step time"), as_array(self.step[1], "step set point", (4,)))
+            object.__setattr__(self, "step", step)
+        if self.push is not None:
+            if not isinstance(self.push, (tuple, list)) or len(self.push) != 3:
+                raise ValueError(f"push: expected (start, duration, [fx, fy, fz]), got {self.push!r}")
+            push = (check_real(self.push[0], "push start"), check_real(self.push[1], "push duration", nonneg=True),
+                    as_array(self.push[2], "push force", (3,)))
+            object.__setattr__(self, "push", push)
 
     @property
     def start_setpoint(self) -> FloatArray:

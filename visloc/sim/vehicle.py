@@ -156,15 +156,21 @@ class Vehicle:
 
         Parameters
         ----------
-        force : ndarray (3,), optional
+        force : array_like (3,), optional
             External force on the CoG, N, in A.
 
         Returns
         -------
         ndarray (3,)
             ``nu'``, m/s^2, in A (NED).
+
+        Raises
+        ------
+        TypeError, ValueError
+            ``force`` not 3 finite numbers.
         """
-        return self._f(self.state, self.inputs, force)[3:6]
+        f = None if force is None else as_array(force, "force", (3,))
+        return self._f(self.state, self.inputs, f)[3:6]
 
     def _f(self, s: FloatArray, u: FloatArray, force: FloatArray | None) -> FloatArray:
         return np.array(self._values(s.tolist(), u.tolist(), None if force is None else force.tolist()))
@@ -232,7 +238,7 @@ class Vehicle:
                                      f"t = {self.time + h:.3f} s: {np.array(new)!r}")
         self.state = np.array(new)
         self.time += h
-        return new
+        return self.state
 
     def rotation(self) -> FloatArray:
         """Body-to-inertial rotation ``R(lambda)`` (3, 3) of the current state (eq. 2.6)."""

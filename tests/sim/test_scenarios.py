@@ -164,3 +164,17 @@ def test_fly_takes_the_objects_a_user_builds():
         fly(sc, "drone", Controller(ARDRONE2), TruthEstimator())
     with pytest.raises(ValueError, match="substeps"):
         fly(sc, vehicle(ARDRONE2), Controller(ARDRONE2), TruthEstimator(), substeps=0)
+
+
+def test_settling_time_counts_nan_as_outside_and_the_linear_step_checks_its_arguments():
+    from visloc.sim.metrics import settling_time
+
+    assert settling_time(np.array([0.0, 1.0, 2.0]), np.array([1.0, 0.0, np.nan]), 0.1, 0.0) is None  # was 1.0
+    assert settling_time(np.array([0.0, 1.0, 2.0]), np.array([1.0, np.nan, 0.0]), 0.1, 0.0) == 2.0
+    g = design_gains(ARDRONE2)
+    t, pos = linear_step_response(g, ARDRONE2, [0.0, 1.0, 0.0, 0.0], 1.0)  # a list step
+    assert len(t) == 201 and pos[-1, 1] > 0.5
+    for kw, match in (({"seconds": -1.0}, "seconds"), ({"dt": 0.0}, "dt"), ({"step": [0.0, 1.0]}, "step")):
+        args = {"step": [0.0, 1.0, 0.0, 0.0], "seconds": 1.0} | kw
+        with pytest.raises(ValueError, match=match):
+            linear_step_response(g, ARDRONE2, args.pop("step"), args.pop("seconds"), **args)

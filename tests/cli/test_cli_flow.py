@@ -111,3 +111,30 @@ def test_flow_direct_is_closer_to_the_truth(flight, tmp_path):
         v = np.array([[float(r["vx"]), float(r["vy"])] for r in _rows(out)[1:]])
         errs[bool(extra)] = np.median(np.linalg.norm(v - true, axis=1) / np.linalg.norm(true, axis=1))
     assert errs[True] < errs[False]
+
+
+def test_pairs_without_motion_tiny_frames_and_an_imu_out_of_time_are_said(flight, tmp_path, capsys):
+    # blank frames used to give a velocity of 0 (no motion was measured), 8 x 8 frames an
+    # internal error, and an IMU file outside the frames' times was ignored without a word
+    import cv2
+
+    blank = tmp_path / "blank"
+    blank.mkdir()
+    for k in range(3):
+        cv2.imwrite(str(blank / f"frame_{k:05d}.png"), np.full((240, 320), 90, np.uint8))
+    cv2.imwrite(str(blank / "frame_00003.png"), np.zeros((8, 8), np.uint8))
+    imu = tmp_path / "imu.csv"
+    imu.write_text("t,gx,gy,gz\n" + "".join(f"{100 + k * 0.005},0.5,0.5,0\n" for k in range(20)))
+    out = tmp_path / "v.csv"
+    code = main(["flow", str(blank), "--camera", str(flight / "camera.yml"), "--height", "1.5", "--fps", "60",
+                 "--imu", str(imu), "--out", str(out)])
+    assert code == 1  # the 8 x 8 frame is recorded and skipped
+    rows = _rows(out)
+    assert len(rows) == 4 and "smaller than 16 x 16" in rows[3]["reason"]
+    assert all(r["vx"] == r["speed"] == "" and r["quality"] == "0.0" for r in rows[1:3])
+    err = capsys.readouterr().err
+    assert "the IMU was not used" in err and "no motion could be measured in any of the 2" in err
+    good = tmp_path / "good.csv"  # a textured flight still fills every pair's velocity
+    assert main(["flow", str(flight), "--camera", str(flight / "camera.yml"), "--height", "1.5", "--fps", "60",
+                 "--out", str(good), "--quiet"]) == 0
+    assert all(r["vx"] != "" for r in _rows(good)[1:])

@@ -148,3 +148,35 @@ def test_an_output_over_the_truth_file_is_refused(tmp_path, capsys):
     code = main(["localize", str(src), "--camera", str(src / "camera.yml"), "--map", str(src / "map.yml"), "--fps", "30",
                  "--truth", str(truth), "--out", str(truth)])
     assert code == 2 and "overwritten" in capsys.readouterr().err and truth.read_bytes() == before
+
+
+def test_frames_before_the_first_fix_and_outside_the_truth_have_no_position_or_error(tmp_path, capsys):
+    # before the first fix the rows held the prior (0, 0, 0) and counted in the median error;
+    # a truth file that did not cover a frame's time was clamped to its nearest row
+    import cv2
+
+    src = tmp_path / "flight"
+    assert main(["render", "localize", str(src), "--seconds", "0.3", "--fps", "30", "--seed", "4"]) == 0
+    frames = sorted(src.glob("*.png"))
+    for p in frames[:4]:  # the first four frames see nothing
+        cv2.imwrite(str(p), np.zeros_like(cv2.imread(str(p))))
+    gt = (src / "ground_truth.csv").read_text().splitlines()
+    short = tmp_path / "truth.csv"
+    short.write_text("\n".join(gt[:7]) + "\n")  # covers frames 0-5 only
+    out = tmp_path / "est.csv"
+    args = ["localize", str(src), "--camera", str(src / "camera.yml"), "--map", str(src / "map.yml"), "--fps", "30"]
+    assert main([*args, "--truth", str(short), "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    with open(out, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [r["fix"] for r in rows[:5]] == ["none"] * 4 + ["used"]
+    assert all(r["x"] == r["vx"] == r["std_x"] == r["error_m"] == "" for r in rows[:4])
+    assert all(r["x"] != "" for r in rows[4:])
+    assert [r["error_m"] != "" for r in rows] == [False] * 4 + [True] * 2 + [False] * (len(rows) - 6)
+    assert "leave out 3 frame(s)" in err and "median position error" in err
+    black = tmp_path / "black"
+    black.mkdir()
+    for p in frames[:3]:
+        cv2.imwrite(str(black / p.name), np.zeros((240, 320), np.uint8))
+    assert main(["localize", str(black), *args[2:], "--out", str(tmp_path / "b.csv")]) == 0
+    assert "no frame gave a position fix" in capsys.readouterr().err

@@ -84,3 +84,23 @@ def test_requests_it_cannot_meet_are_one_line_errors_before_any_work(tmp_path, c
     assert code == 2 and len(err.splitlines()) == 1 and message in err
     assert (tmp_path / "ref.yml").read_bytes() == before
     assert not (tmp_path / "loc").exists() and not (tmp_path / "sheet").exists()
+
+
+@pytest.mark.parametrize("maps, poles, message", [
+    (("body", "ref"), ["0", "0"], "--poles: poles must have negative real parts"),
+    (("body", "ref"), ["nan", "-4"], "--poles"),
+    (("ref", "ref"), ["-4", "-4"], "share marker ids"),
+])
+def test_track_options_it_cannot_use_are_usage_errors(tmp_path, capsys, maps, poles, message):
+    # they used to end in an "internal error" (exit 3) at the first frame with the body in view
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    cv2.imwrite(str(frames / "f0.png"), np.zeros((48, 64), np.uint8))
+    BODY.to_file(tmp_path / "body.yml")
+    REFERENCE.to_file(tmp_path / "ref.yml")
+    write_camera_yml(tmp_path / "cam.yml", default_camera(SIZE), SIZE)
+    code = main(["track", str(frames), "--fps", "30", "--camera", str(tmp_path / "cam.yml"),
+                 "--body", str(tmp_path / f"{maps[0]}.yml"), "--reference", str(tmp_path / f"{maps[1]}.yml"),
+                 "--poles", *poles, "--quiet"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and message in err

@@ -107,7 +107,7 @@ def flow(args: argparse.Namespace) -> int:
     camera = Camera.from_file(args.camera)
     heights = _read_heights(args.height_csv) if args.height_csv else None
     gyro_log = imu_input(args, ("t", "gx", "gy", "gz"), "flow")  # body rates in camera axes, rad/s
-    failed = n_frames = 0
+    failed = n_frames = pairs = unmeasured = gyro_used = 0
     times: list[float] = []
     qualities: list[float] = []
     with ExitStack() as stack:
@@ -136,6 +136,11 @@ def flow(args: argparse.Namespace) -> int:
                     failed += 1
                     _skip(out, row, f"--height-csv has no height for frame {frame.index}")
                     continue
+            if min(frame.image.shape[:2]) < 16:  # the block flow needs 16 x 16 px
+                failed += 1
+                reason = f"{frame.image.shape[1]} x {frame.image.shape[0]} px, smaller than 16 x 16"
+                _skip(out, row, reason, f"{frame.name}: {reason}; skipped")
+                continue
             cam = camera_for(camera, frame.image.shape, warned, "flow")
             if ego is None or ego.frame_shape != frame.image.shape[:2]:
                 if ego is not None:
@@ -155,19 +160,28 @@ def flow(args: argparse.Namespace) -> int:
                 _skip(out, row, reason, f"{frame.name}: {reason}; skipped")
                 continue
             gyro = mean_between(gyro_log, last_time, frame.time) if gyro_log is not None else None
+            gyro_used += gyro is not None
             t0 = time.perf_counter()
             gv = ego.update(frame.image, dt=dt, height=height, gyro=gyro)
             times.append(time.perf_counter() - t0)
             qualities.append(gv.quality)
             last_time = frame.time
             x, y = ego.position
+            measured = gv.motion is not None and gv.motion.inliers > 0  # else no velocity: its columns stay empty
+            pairs += 1
+            unmeasured += not measured
             if out:
-                out.write(row | {"vx": gv.v[0], "vy": gv.v[1], "speed": float(np.hypot(*gv.v)), "yaw_rate": gv.yaw_rate,
-                                 "quality": gv.quality, "reason": gv.reason, "x": x, "y": y, "yaw": ego.yaw})
+                v = {"vx": gv.v[0], "vy": gv.v[1], "speed": float(np.hypot(*gv.v)), "yaw_rate": gv.yaw_rate} if measured else {}
+                out.write(row | v | {"quality": gv.quality, "reason": gv.reason, "x": x, "y": y, "yaw": ego.yaw})
             if rec:
                 rec.log_flow(frame.index, frame.time, frame.image, ego.last_field, gv, (x, y))
             if link is not None:
                 link.send_optical_flow(frame.time, dt, gv.v, height, gv.quality, gyro=gyro)
+    if gyro_log is not None and pairs and not gyro_used:
+        warn("flow", f"--imu {args.imu or args.imu_topic}: its times {gyro_log[0, 0]:g} .. {gyro_log[-1, 0]:g} s do not "
+                     "overlap the frame pairs': the IMU was not used")
+    if pairs and unmeasured == pairs:
+        warn("flow", f"no motion could be measured in any of the {pairs} frame pairs (too little texture?)")
     if not args.quiet:
         ms = f", median {1e3 * float(np.median(times)):.2f} ms per pair" if times else ""
         q = f", median quality {float(np.median(qualities)):.2f}" if qualities else ""

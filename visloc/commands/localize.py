@@ -111,7 +111,7 @@ def localize(args: argparse.Namespace) -> int:
     R_map_cam = None
     last_t = None
     last_pose = None
-    failed = n_frames = fixes = imu_used = 0
+    failed = n_frames = fixes = imu_used = outside = 0
     frame_times: list[float] = []
     errors: list[float] = []
     with ExitStack() as stack:
@@ -148,13 +148,18 @@ def localize(args: argparse.Namespace) -> int:
             if mp is not None:  # the pose's own covariance, floored (visloc.estimation.fusion)
                 fix = "used" if fusion.fix(mp.position, mp.position_covariance) else "rejected"
                 fixes += fix == "used"
-            pos, vel, sd = fusion.position, fusion.velocity, fusion.position_std
-            row |= {"x": pos[0], "y": pos[1], "z": pos[2], "vx": vel[0], "vy": vel[1], "vz": vel[2],
-                    "std_x": sd[0], "std_y": sd[1], "std_z": sd[2],
-                    "markers": len(mp.used) if mp is not None else 0, "fix": fix}
+            row |= {"markers": len(mp.used) if mp is not None else 0, "fix": fix}
+            pos = None  # no estimate before the first fix: the columns stay empty (the prior is no position)
+            if fusion.fixes:
+                pos, vel, sd = fusion.position, fusion.velocity, fusion.position_std
+                row |= {"x": pos[0], "y": pos[1], "z": pos[2], "vx": vel[0], "vy": vel[1], "vz": vel[2],
+                        "std_x": sd[0], "std_y": sd[1], "std_z": sd[2]}
             true_pos = None
-            if truth is not None:
+            if truth is not None and truth["t"][0] <= frame.time <= truth["t"][-1]:  # no clamped truth outside
                 true_pos = np.array([np.interp(frame.time, truth["t"], truth[k]) for k in ("x", "y", "z")])
+            elif truth is not None:
+                outside += 1
+            if true_pos is not None and pos is not None:
                 row["error_m"] = float(np.linalg.norm(pos - true_pos))
                 errors.append(row["error_m"])
             if out:
@@ -167,6 +172,11 @@ def localize(args: argparse.Namespace) -> int:
         warn("localize", f"--imu {args.imu or args.imu_topic}: its times {imu[0, 0]:g} .. {imu[-1, 0]:g} s do not overlap the frames' "
                          f"{frame_times[0]:g} .. {frame_times[-1]:g} s (or no frame had a fix to turn it into the "
                          "map frame): the IMU was not used")
+    if truth is not None and outside:
+        warn("localize", f"--truth {args.truth}: its times {truth['t'][0]:g} .. {truth['t'][-1]:g} s leave out "
+                         f"{outside} frame(s); their error_m is empty")
+    if n_frames > failed and fixes == 0:
+        warn("localize", "no frame gave a position fix (no map marker found): the position columns are empty")
     if not args.quiet:
         err = f", median position error {1e3 * float(np.median(errors)):.1f} mm" if errors else ""
         used = f", IMU between {imu_used} frame pairs" if imu is not None else ""
@@ -254,6 +264,13 @@ def track(args: argparse.Namespace) -> int:
 
     body = MarkerMap.from_file(args.body)
     reference = MarkerMap.from_file(args.reference)
+    shared = sorted(set(body.ids.tolist()) & set(reference.ids.tolist()))
+    if shared:  # checked here, before any frame (track_body would refuse every one)
+        raise UsageError(f"--body and --reference share marker ids {shared[:10]}: a detection could not be told apart")
+    try:
+        LuenbergerObserver(args.poles, 1.0 / 30.0)  # the poles checked before any frame
+    except ValueError as exc:
+        raise UsageError(f"--poles: {exc}") from None
     dictionary_for(args, "track", body, reference)
     find = finder_for(detector_for(args), args).detect
     camera = Camera.from_file(args.camera)

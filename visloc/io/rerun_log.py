@@ -293,7 +293,7 @@ class RerunLogger(Closing):
             rec.log("track/position", _rerun().LineStrips2D([self._track]))
 
     def log_localize(self, index: int, time: float, image: NDArray[np.uint8] | None,
-                     estimate: Sequence[float], truth: Sequence[float] | None = None) -> None:
+                     estimate: Sequence[float] | None, truth: Sequence[float] | None = None) -> None:
         """Log one frame of a localisation run.
 
         Logs the image, the estimated position (and the true one when known) as scalar plots
@@ -304,8 +304,9 @@ class RerunLogger(Closing):
         ----------
         index, time, image
             As for :meth:`log_flow` (``None``: the viewer keeps showing the last image).
-        estimate : sequence of float (3,)
-            Estimated camera position ``(x, y, z)``, m, map frame.
+        estimate : sequence of float (3,) or None
+            Estimated camera position ``(x, y, z)``, m, map frame; None (no estimate yet):
+            nothing is logged for it.
         truth : sequence of float (3,), optional
             True position in the same frame and units; None (unknown): nothing is logged for it.
 

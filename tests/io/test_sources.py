@@ -267,7 +267,16 @@ def test_a_video_with_corrupt_bytes_is_read_past_them_and_says_so(tmp_path: Path
     frames = list(open_source(bad))
     good = [f for f in frames if f.image is not None]
     assert len(good) > 60  # frames after the damage are read too (it used to stop there)
-    assert frames[-1].image is None and "of 100 the container declares" in frames[-1].error
+    lost = [f for f in frames if f.image is None and "could not be decoded" in f.error]
+    assert lost  # each at its own place: the frames after keep their indices and times
+    assert [f.index for f in frames] == list(range(len(frames)))
+    assert [f.time for f in frames[:97]] == pytest.approx([k / 30 for k in range(97)], abs=1e-3)
+    assert all(f.name.endswith(f"#{f.index}") for f in lost)
+    end = [f for f in frames if f.name.endswith("#end")]
+    if len(frames) - len(end) < 100:  # fewer than declared: one last row says so
+        assert end == [frames[-1]] and "of 100 the container declares" in end[0].error
+    else:
+        assert not end
     truncated = tmp_path / f"cut{ext}"
     truncated.write_bytes(path.read_bytes()[: len(data) * 2 // 3])
     if ext == ".mp4":  # its index is at the end: a cut file cannot be opened, and says so

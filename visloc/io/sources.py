@@ -229,11 +229,12 @@ class VideoSource(FrameSource):
     reports no usable timestamps, ``index / CAP_PROP_FPS`` is used, and from a first unusable
     one on (not finite, negative or not increasing) the times go on from the last stamp at
     ``CAP_PROP_FPS`` (never back). A frame the decoder cannot
-    deliver (corrupt bytes) is skipped and reading goes on; the stream ends after
-    :data:`MAX_BAD_READS` failed reads in a row. When frames were lost, or fewer arrived than the
-    container declares (a truncated file), a last frame without an image says so in its
-    ``error`` (the commands count and report it). Each new iteration starts again from the
-    first frame.
+    deliver (corrupt bytes) comes as a frame without an image at its own index (its time between
+    its neighbours'), its ``error`` saying so, and reading goes on (the frames after keep their
+    indices); the stream ends after :data:`MAX_BAD_READS` failed reads in a row. When fewer
+    frames arrived than the container declares (a truncated file), a last frame without an
+    image says so in its ``error`` (the commands count and report both). Each new iteration
+    starts again from the first frame.
 
     Parameters
     ----------
@@ -289,19 +290,26 @@ class VideoSource(FrameSource):
                 if bad >= MAX_BAD_READS:
                     break
                 continue
-            lost += bad  # failed reads followed by a good frame: corrupt frames skipped
+            # failed reads followed by a good frame: each lost one frame (OpenCV reads one frame
+            # a call), recorded at its place so that the frames after keep their indices
+            t = clock.time(index + bad, capture.get(cv2.CAP_PROP_POS_MSEC) / 1000.0)
+            for k in range(bad):
+                lost_t = (last_time + (t - last_time) * (k + 1) / (bad + 1) if math.isfinite(last_time)
+                          else max(t - (bad - k) * clock.step, 0.0))
+                yield Frame(index, lost_t, None, f"{self.path}#{index}",
+                            f"video {self.path}: frame {index} could not be decoded (corrupt bytes); skipped")
+                index += 1
+            lost += bad
             bad = 0
-            t = last_time = clock.time(index, capture.get(cv2.CAP_PROP_POS_MSEC) / 1000.0)
+            last_time = t
             yield Frame(index, t, _to_uint8(image), f"{self.path}#{index}")
             index += 1
         if self._closed:
             return
-        short = self.frame_count is not None and index < self.frame_count
-        if lost or short:
-            declared = f" of {self.frame_count} the container declares" if self.frame_count else ""
+        if self.frame_count is not None and index < self.frame_count:
             yield Frame(index, max(last_time, 0.0), None, f"{self.path}#end",
-                        f"video {self.path}: {index} frames read{declared}; {lost} corrupt frames skipped"
-                        + ("; the file ends early" if short and index + lost < self.frame_count else ""))
+                        f"video {self.path}: {index} frames read of {self.frame_count} the container declares "
+                        f"({lost} of them corrupt); the file ends early")
 
     def close(self) -> None:
         """Release the capture."""

@@ -39,6 +39,22 @@ def test_calibrate_recovers_the_rendered_camera(views, tmp_path, capsys):
     fs.release()
 
 
+def test_calibrate_fisheye_json_is_strict(views, tmp_path, capsys):
+    # the fisheye model has no standard deviations: they were printed as NaN (not JSON) and
+    # written as .nan into the camera file
+    _, board, out = views
+    cam = tmp_path / "fisheye.yml"
+    assert main(["calibrate", str(out), "--board", str(board), "--out", str(cam), "--json", "--quiet",
+                 "--model", "fisheye"]) == 0
+
+    def refuse(word):
+        raise ValueError(f"not strict JSON: {word}")
+
+    summary = json.loads(capsys.readouterr().out, parse_constant=refuse)
+    assert summary["model"] == "fisheye" and summary["std_fx_fy_cx_cy_dist"] == [None] * 8
+    assert "nan" not in cam.read_text().lower() and Camera.from_file(cam).model == "fisheye"
+
+
 def test_calibrate_api_leaves_out_thin_views(views):
     _, _, out = views
     found = [detect_charuco(cv2.imread(str(p)), BOARD) for p in sorted(out.glob("view_*.png"))]
@@ -124,7 +140,25 @@ def _fisheye_views(board, K, D, size, n=12, seed=4):
     return views
 
 
-def test_fisheye_model_recovers_a_wide_angle_camera(tmp_path):
+def _no_nan_in_the_commands_report(cal, capsys):
+    """``visloc calibrate``'s JSON is strict JSON (null, not NaN) and its table says n/a."""
+    import json
+
+    from visloc.commands.calibrate import _print_summary, _summary
+    from visloc.io import to_jsonable
+
+    def refuse(word):
+        raise ValueError(word)
+
+    names = [f"v{i}" for i in range(max(cal.views) + 1)]
+    report = json.loads(json.dumps(to_jsonable(_summary(cal, names))), parse_constant=refuse)
+    assert report["std_fx_fy_cx_cy_dist"] == [None] * 8
+    _print_summary(cal, names, [], "out.yml")
+    err = capsys.readouterr().err
+    assert "+- n/a" in err and "nan" not in err
+
+
+def test_fisheye_model_recovers_a_wide_angle_camera(tmp_path, capsys):
     # a 190-degree-class lens: f = 250 px on 800 x 600, k1..k4 of a real fisheye
     board = CharucoBoard(9, 6, 0.03, 0.022, "DICT_5X5_100")
     K = np.array([[250.0, 0.0, 401.3], [0.0, 250.0, 297.8], [0.0, 0.0, 1.0]])
@@ -142,6 +176,8 @@ def test_fisheye_model_recovers_a_wide_angle_camera(tmp_path):
     # the camera file carries the model, and the camera projects as the lens does
     cam = Camera.from_file(cal.to_file(tmp_path / "fisheye.yml"))
     assert cam.model == "fisheye" and np.allclose(cam.dist, cal.dist)
+    assert "nan" not in (tmp_path / "fisheye.yml").read_text().lower()  # no .nan deviations written
+    _no_nan_in_the_commands_report(cal, capsys)
     p = np.array([[0.3, -0.2, 0.25], [-0.1, 0.05, 0.4]])
     expected = cv2.fisheye.projectPoints(p.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), cal.K, cal.dist)[0]
     assert np.allclose(cam.project(p), expected.reshape(-1, 2))

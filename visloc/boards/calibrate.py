@@ -104,7 +104,8 @@ class Calibration:
 
     def to_file(self, path: str | Path) -> Path:
         """Write the camera file (OpenCV FileStorage YAML, as ``Camera.from_file`` reads it)
-        with the calibration's figures.
+        with the calibration's figures (the standard deviations only where they are known: not
+        for the fisheye model).
 
         Parameters
         ----------
@@ -118,8 +119,9 @@ class Calibration:
         path = Path(path)
         extra = {"distortion_model": self.model, "reprojection_rms_px": float(self.rms),
                  "per_view_rms_px": np.asarray(self.per_view, np.float64).reshape(1, -1),
-                 "std_fx_fy_cx_cy_dist": np.asarray(self.std, np.float64).reshape(1, -1),
                  "views_used": len(self.views)}
+        if np.isfinite(self.std).all():  # the fisheye model has none: no node rather than .nan
+            extra["std_fx_fy_cx_cy_dist"] = np.asarray(self.std, np.float64).reshape(1, -1)
         self.camera.to_file(path, extra=extra)
         return path
 

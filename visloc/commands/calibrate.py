@@ -17,7 +17,7 @@ from scipy.spatial.transform import Rotation
 from visloc.boards import CharucoBoard, MarkerBoard, calibrate, detect_charuco, detect_marker_board
 from visloc.commands._common import frames_of, warn
 from visloc.errors import UsageError
-from visloc.io import open_source
+from visloc.io import open_source, to_jsonable
 from visloc.io.closing import commit_staged, staged_path
 
 #: below this many degrees between the board's normal and the optical axis in every view, the
@@ -99,7 +99,7 @@ def calibrate_camera(args: argparse.Namespace) -> int:
         _write_coverage(Path(args.coverage), cal, views, board)
     advice = _advice(cal, views, size)
     if args.json:
-        print(json.dumps(_summary(cal, names) | {"advice": advice}, indent=1))
+        print(json.dumps(to_jsonable(_summary(cal, names) | {"advice": advice}), indent=1))  # NaN: null
     elif not args.quiet:
         _print_summary(cal, names, advice, args.out)
     return 1 if failed else 0
@@ -161,11 +161,11 @@ def _advice(cal, views, size) -> list[str]:
 
 
 def _print_summary(cal, names: list[str], advice: list[str], out: str) -> None:
-    s = cal.std
+    s = [f"{v:.2f}" if math.isfinite(v) else "n/a" for v in cal.std.tolist()]  # fisheye: none from OpenCV
     print(f"calibrated from {len(cal.views)} views ({cal.model}): RMS reprojection error {cal.rms:.3f} px",
           file=sys.stderr)
-    print(f"  fx {cal.K[0, 0]:.2f} +- {s[0]:.2f}  fy {cal.K[1, 1]:.2f} +- {s[1]:.2f}  cx {cal.K[0, 2]:.2f} +- "
-          f"{s[2]:.2f}  cy {cal.K[1, 2]:.2f} +- {s[3]:.2f} px", file=sys.stderr)
+    print(f"  fx {cal.K[0, 0]:.2f} +- {s[0]}  fy {cal.K[1, 1]:.2f} +- {s[1]}  cx {cal.K[0, 2]:.2f} +- "
+          f"{s[2]}  cy {cal.K[1, 2]:.2f} +- {s[3]} px", file=sys.stderr)
     print("  distortion " + " ".join(f"{v:.5f}" for v in cal.dist), file=sys.stderr)
     worst = np.argsort(cal.per_view)[::-1][:3]
     print("  worst views: " + ", ".join(f"{names[cal.views[i]]} {cal.per_view[i]:.3f} px" for i in worst),

@@ -79,6 +79,24 @@ def test_render_board_prints_to_scale(views, tmp_path):
     assert main(["render", "board", str(board), str(tmp_path / "sheet"), "--dpi", "100"]) == 2
 
 
+def test_render_board_and_calibration_need_a_charuco_board_file(tmp_path, capsys):
+    # a marker map (a board for calibrate, not one to draw) and an infinite square count used
+    # to end in internal errors (AttributeError, OverflowError)
+    from visloc.pose import GridMap
+
+    GridMap(2, 2, 0.05, 0.01).to_file(tmp_path / "map.yml")
+    (tmp_path / "inf.yml").write_text("%YAML:1.0\nboard_type: charuco\nsquares_x: .inf\nsquares_y: 5\n"
+                                      "square_length: 0.04\nmarker_length: 0.03\n")
+    for argv, message in ((["render", "board", "{d}/map.yml", "{d}/s.png"], "not a ChArUco board file"),
+                          (["render", "calibration", "{d}/views", "--board", "{d}/map.yml", "--n", "3"],
+                           "not a ChArUco board file"),
+                          (["render", "board", "{d}/inf.yml", "{d}/s.png"], "must be integers, got inf")):
+        assert main([a.format(d=tmp_path) for a in argv]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and message in err
+    assert not (tmp_path / "views").exists() and not (tmp_path / "s.png").exists()
+
+
 def test_bad_inputs_are_one_line_errors(views, tmp_path, capsys):
     _root, board, out = views
     empty = tmp_path / "empty"

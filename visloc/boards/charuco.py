@@ -23,6 +23,8 @@ the saddle point of a quadratic fitted to the light around it (:func:`refine_sad
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -255,7 +257,7 @@ class CharucoBoard:
         finally:
             fs.release()
         sx, sy = values["squares_x"], values["squares_y"]
-        if sx != int(sx) or sy != int(sy):
+        if not (math.isfinite(sx) and math.isfinite(sy)) or sx != int(sx) or sy != int(sy):
             raise ValueError(f"board file {path}: squares_x and squares_y must be integers, got {sx}, {sy}")
         return cls(int(sx), int(sy), values["square_length"], values["marker_length"], dictionary, first, legacy)
 

@@ -34,8 +34,17 @@ def _board(path: str) -> CharucoBoard | MarkerBoard:
         if "board_type" in Path(path).read_text(errors="replace"):
             return CharucoBoard.from_file(path)
         return MarkerBoard.from_file(path)
-    except (ValueError, OSError) as exc:
+    except (ValueError, OSError, OverflowError) as exc:
         raise UsageError(str(exc)) from None
+
+
+def _charuco_board(path: str) -> CharucoBoard:
+    """A ChArUco board file: what ``render board`` and ``render calibration`` draw."""
+    board = _board(path)
+    if not isinstance(board, CharucoBoard):
+        raise UsageError(f"--board {path}: a marker map, not a ChArUco board file (board_type: charuco); "
+                         "'visloc render map' draws a map")
+    return board
 
 
 def _find(image, board: CharucoBoard | MarkerBoard, response):
@@ -190,7 +199,7 @@ def render_board(args: argparse.Namespace) -> int:
     """
     if not cv2.haveImageWriter(args.output):
         raise UsageError(f"cannot write {args.output}: the name must end in an image extension (e.g. .png)")
-    board = _board(args.board)
+    board = _charuco_board(args.board)
     px = round(board.square_length / 0.0254 * args.dpi)
     if px < 8:
         raise UsageError(f"--dpi {args.dpi} gives {px} px per square: at least 8 are needed")
@@ -223,7 +232,7 @@ def render_calibration(args: argparse.Namespace) -> int:
     """
     from visloc.synth.calibration import render_calibration_views
 
-    board = _board(args.board)
+    board = _charuco_board(args.board)
     outdir = Path(args.outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     try:

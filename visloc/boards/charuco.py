@@ -24,7 +24,6 @@ the saddle point of a quadratic fitted to the light around it (:func:`refine_sad
 from __future__ import annotations
 
 import math
-
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path

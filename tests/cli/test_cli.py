@@ -92,6 +92,16 @@ def test_max_frames_counts_the_frames_processed_not_those_skipped_before_the_ran
     assert [r["frame"] for r in _lines(out)] == [1, 2]
 
 
+def test_a_frame_range_past_the_end_is_a_usage_error(rendered, tmp_path, capsys):
+    # it used to succeed with "0 frames" and no output file at all
+    n = len(list(rendered.glob("*.png")))
+    out = tmp_path / "range.jsonl"
+    assert main(["detect", str(rendered), "--frame-range", f"{n}:", "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and f"starts past the end of the source ({n} frames)" in err
+    assert not out.exists()
+
+
 def test_detect_video(tmp_path):
     assert main(["render", "markers", str(tmp_path), "--video", "--n", "12", "--size", "320x240"]) == 0
     video = tmp_path / "markers.mp4"

@@ -8,6 +8,7 @@ import sys
 import numpy as np
 from tqdm import tqdm
 
+from visloc.errors import UsageError
 from visloc.markers import FAST_PASSES, MarkerDetector, MarkerTracker
 from visloc.pose import Camera
 from visloc.types import MarkerDetection, Pose
@@ -21,7 +22,6 @@ def dictionary_for(args: argparse.Namespace, command: str, *maps) -> str:
     """The dictionary of a command that reads marker maps: ``--dict`` when given (a map that
     records another one is a :class:`visloc.cli.UsageError`), else the one the maps record,
     else DICT_4X4_50 with a warning. Sets ``args.dict``."""
-    from visloc.errors import UsageError
 
     recorded = {m.dictionary for m in maps if m.dictionary}
     if len(recorded) > 1:
@@ -59,7 +59,8 @@ def frames_of(source, args: argparse.Namespace):
     """The frames of an open source with a progress bar (unless ``--quiet``), stopping after
     ``--max-frames`` frames processed; with ``--frame-range START:STOP`` only the frames whose index is in
     ``[START, STOP)`` (the source is read from its start, so each frame keeps the index, time
-    and name it has in the whole source). From the first frame on, ``args.started`` is True: the inputs were
+    and name it has in the whole source; a range that starts past the source's end is a
+    :class:`~visloc.errors.UsageError`). From the first frame on, ``args.started`` is True: the inputs were
     accepted, so an exception from here on is visloc's fault (:func:`visloc.cli.main` reports
     a ``ValueError`` as an internal error then, not as a usage error)."""
     try:
@@ -72,8 +73,9 @@ def frames_of(source, args: argparse.Namespace):
     if args.max_frames:  # frames read: those skipped before START, then at most --max-frames processed
         total = min(total, start + args.max_frames) if total else start + args.max_frames
     bar = tqdm(source, total=total, unit="frame", disable=True if args.quiet else None, file=sys.stderr)
-    done = 0
+    done = seen = 0
     for frame in bar:
+        seen += 1
         if frame.index < start:  # read, not processed: indices and times stay the whole source's
             continue
         if stop is not None and frame.index >= stop:
@@ -83,6 +85,9 @@ def frames_of(source, args: argparse.Namespace):
         yield frame
         if args.max_frames and done >= args.max_frames:  # stop before reading another frame
             break
+    if start > 0 and done == 0:  # a range past the end: say so rather than succeed with nothing
+        raise UsageError(f"--frame-range {start}:{'' if stop is None else stop} starts past the end of the source "
+                         f"({seen} frames)")
 
 def marker_records(dets: list[MarkerDetection], poses: list[Pose | None] | None) -> list[dict]:
     """JSON records of detections, with pose fields (``rvec``, ``tvec``, ``R``, Euler angles,

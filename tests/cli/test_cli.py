@@ -207,7 +207,9 @@ def test_robust_json_reports_a_stable_polytope_and_rejects_a_sigma_beyond_the_bo
     except ImportError:
         assert s["lyapunov"] == "unavailable"
     assert main(["robust", "--sigma", "99"]) == 2
-    assert "n_sigma" in capsys.readouterr().err
+    assert "--sigma must be from 0 to below 8.394610202" in capsys.readouterr().err
+    assert main(["robust", "--sigma", "8.3949"]) == 2  # the bound used to be rounded to 8.395 in the message
+    assert "below 8.394610202" in capsys.readouterr().err
     assert main(["robust", "--tilt", "50"]) == 2  # the tracking loop's check: below 45 degrees
     assert "--tilt" in capsys.readouterr().err
 

@@ -178,3 +178,14 @@ def test_settling_time_counts_nan_as_outside_and_the_linear_step_checks_its_argu
         args = {"step": [0.0, 1.0, 0.0, 0.0], "seconds": 1.0} | kw
         with pytest.raises(ValueError, match=match):
             linear_step_response(g, ARDRONE2, args.pop("step"), args.pop("seconds"), **args)
+
+
+def test_scenario_sizes_reach_the_command_lines_bound():
+    # the CLI took --distance / --side up to 100 and the scenarios then refused 100
+    from visloc.sim import figure8_scenario, square_scenario, step_scenario
+
+    assert step_scenario(100.0).step[1][1] == 100.0
+    assert square_scenario(100.0).trajectory is not None and figure8_scenario(100.0).trajectory is not None
+    for make in (step_scenario, square_scenario, figure8_scenario):
+        with pytest.raises(ValueError, match=r"\(0, 100\]"):
+            make(100.5)

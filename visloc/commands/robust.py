@@ -23,11 +23,15 @@ def robust(args: argparse.Namespace) -> int:
     int
         Exit status: 0 when every vertex is stable, 1 when one is not.
     """
-    from visloc.control.robustness import robust_summary
+    from visloc.control.robustness import max_sigma, robust_summary
     from visloc.errors import UsageError
+    from visloc.model.params import ARDRONE2
 
     if not 0.0 <= args.tilt < 45.0:  # NaN too
         raise UsageError(f"--tilt must be from 0 to below 45 degrees, got {args.tilt:g}")
+    if not 0.0 <= args.sigma < max_sigma(ARDRONE2):  # NaN too; named as the user typed it
+        raise UsageError(f"--sigma must be from 0 to below {max_sigma(ARDRONE2):.10g} (beyond it a motor "
+                         f"coefficient of eqs. 4.12-4.13 is <= 0), got {args.sigma:g}")
     s = robust_summary(args.sigma, tilt_deg=args.tilt)
     if args.json:
         print(json.dumps(s, indent=1))

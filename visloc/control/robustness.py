@@ -119,7 +119,7 @@ def _check_sigma(n_sigma: float, params: ARDrone2Params) -> float:
     n = check_real(n_sigma, "n_sigma", nonneg=True)
     if n >= max_sigma(params):
         raise ValueError(
-            f"n_sigma: expected < {max_sigma(params):.4g} (beyond it a motor coefficient of "
+            f"n_sigma: expected < {max_sigma(params):.10g} (beyond it a motor coefficient of "
             f"eqs. 4.12-4.13 is <= 0), got {n!r}"
         )
     return n

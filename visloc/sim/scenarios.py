@@ -171,7 +171,7 @@ def step_scenario(distance: float, *, smooth: bool = True, start: float = 1.0, l
     Parameters
     ----------
     distance : float
-        m (> 0).
+        m (> 0, at most 100).
     smooth : bool
         Fly the trajectory (True) or jump the set point (False).
     start : float
@@ -188,8 +188,8 @@ def step_scenario(distance: float, *, smooth: bool = True, start: float = 1.0, l
         measured from there, with a 5 % band.
     """
     d = float(distance)
-    if not (0.0 < d < 100.0):
-        raise ValueError(f"distance must be in (0, 100) m, got {distance!r}")
+    if not (0.0 < d <= 100.0):
+        raise ValueError(f"distance must be in (0, 100] m, got {distance!r}")
     target = np.array([0.0, d, -HOVER_HEIGHT, 0.0])
     if not smooth:
         return Scenario("step", f"a {d:g} m set-point step in y at t = {start:g} s", start + settle,
@@ -208,7 +208,7 @@ def square_scenario(side: float = 1.25, *, speed: float = 0.5, vision: bool = Fa
     Parameters
     ----------
     side : float
-        m (> 0; with ``vision`` the view must stay over the printed grid: up to about 1.3 m).
+        m (> 0, at most 100; with ``vision`` the view must stay over the printed grid: up to about 1.3 m).
     speed : float
         Speed limit, m/s (> 0).
     vision : bool
@@ -225,8 +225,8 @@ def square_scenario(side: float = 1.25, *, speed: float = 0.5, vision: bool = Fa
         Named ``square``; 2 s after the return; ``position_rms_m`` is the tracking RMS.
     """
     s = float(side)
-    if not (0.0 < s < 100.0):
-        raise ValueError(f"side must be in (0, 100) m, got {side!r}")
+    if not (0.0 < s <= 100.0):
+        raise ValueError(f"side must be in (0, 100] m, got {side!r}")
     h, z = 0.5 * s, -HOVER_HEIGHT
     corners = [[0.0, 0.0, z], [-h, -h, z], [h, -h, z], [h, h, z], [-h, h, z], [-h, -h, z], [0.0, 0.0, z]]
     traj = MinJerkTrajectory(corners, limits or model_limits(speed=speed), start=start)
@@ -241,7 +241,7 @@ def figure8_scenario(width: float = 1.2, *, speed: float = 0.5, vision: bool = F
     Parameters
     ----------
     width : float
-        m (> 0; with ``vision`` up to about 1.3 m: the view stays over the printed grid).
+        m (> 0, at most 100; with ``vision`` up to about 1.3 m: the view stays over the printed grid).
     speed, vision, start, limits
         As :func:`square_scenario`.
 
@@ -251,8 +251,8 @@ def figure8_scenario(width: float = 1.2, *, speed: float = 0.5, vision: bool = F
         Named ``figure8``; 2 s after the return; ``position_rms_m`` is the tracking RMS.
     """
     w = float(width)
-    if not (0.0 < w < 100.0):
-        raise ValueError(f"width must be in (0, 100) m, got {width!r}")
+    if not (0.0 < w <= 100.0):
+        raise ValueError(f"width must be in (0, 100] m, got {width!r}")
     traj = Figure8Trajectory([0.0, 0.0, -HOVER_HEIGHT], w, limits or model_limits(speed=speed), start=start)
     return _tracking("figure8", f"a {w:g} m figure eight at up to {speed:g} m/s", traj, vision)
 

@@ -46,6 +46,17 @@ def _at_most(limit: float, why: str):
     return parse
 
 
+def _seed(text: str) -> int:
+    """An argparse type: a random seed, a whole number >= 0 (numpy's seeds)."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0 (a random seed), got {text!r}")
+    return v
+
+
 #: most frames ``render localize`` and ``render flow`` hold in memory (seconds x fps)
 MAX_RENDER_FRAMES = 5000
 
@@ -166,7 +177,7 @@ def _add_render(sub: argparse._SubParsersAction) -> None:
     rm = rs.add_parser("markers", help="random marker scenes (images or a video) + ground_truth.json")
     rm.add_argument("outdir", help="output folder")
     rm.add_argument("--n", type=_count, default=100, help="number of frames (default 100)")
-    rm.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
+    rm.add_argument("--seed", type=_seed, default=1, help="random seed (default 1)")
     rm.add_argument("--size", type=_size, default=(640, 480), help="WIDTHxHEIGHT (default 640x480)")
     rm.add_argument("--dict", default="DICT_4X4_50", metavar="NAME|FILE", help="dictionary")
     rm.add_argument("--difficulty", default="easy", choices=["easy", "hard", "small", "dark", "empty"])
@@ -184,12 +195,12 @@ def _add_render(sub: argparse._SubParsersAction) -> None:
     rl.add_argument("outdir", help="output folder")
     rl.add_argument("--seconds", type=_positive, default=5.0, help="duration (default 5 s)")
     rl.add_argument("--fps", type=_positive, default=30.0, help="frame rate (default 30)")
-    rl.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
+    rl.add_argument("--seed", type=_seed, default=1, help="random seed (default 1)")
     rf = rs.add_parser("flow", help="a downward camera's flight over ground + ground_truth.csv")
     rf.add_argument("outdir", help="output folder")
     rf.add_argument("--seconds", type=_positive, default=10.0, help="duration (default 10 s)")
     rf.add_argument("--fps", type=_positive, default=60.0, help="frame rate (default 60)")
-    rf.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
+    rf.add_argument("--seed", type=_seed, default=1, help="random seed (default 1)")
     rf.add_argument("--size", type=_size, default=(320, 240), help="WIDTHxHEIGHT (default 320x240)")
     rf.add_argument("--texture", default="grass", choices=["grass", "gravel", "brick", "noise"])
     rf.add_argument("--video", action="store_true", help="write flight.mp4 instead of PNG frames")
@@ -203,7 +214,7 @@ def _add_render(sub: argparse._SubParsersAction) -> None:
     rc.add_argument("--board", required=True, metavar="BOARD.yml", help="board file")
     rc.add_argument("--n", type=_count, default=30, help="number of views (default 30, at most 500)")
     rc.add_argument("--size", type=_size, default=(1280, 720), help="WIDTHxHEIGHT (default 1280x720)")
-    rc.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    rc.add_argument("--seed", type=_seed, default=0, help="random seed (default 0)")
 
 
 def _add_calibrate(sub: argparse._SubParsersAction) -> None:
@@ -374,7 +385,7 @@ def _add_sim(sub: argparse._SubParsersAction) -> None:
                     help="simulated duration (default: the scenario's; at most 3600)")
     sm.add_argument("--sigma", type=float, default=0.0, metavar="N",
                     help="draw each motor's c, d at +-N standard deviations (signs from --seed; default 0)")
-    sm.add_argument("--seed", type=int, default=0, help="seed of motor signs, sensor noise, turbulence (default 0)")
+    sm.add_argument("--seed", type=_seed, default=0, help="seed of motor signs, sensor noise, turbulence (default 0)")
     sm.add_argument("--warmup", type=float, metavar="S",
                     help="seconds of hover before t = 0 so the integrators absorb the motor spread "
                          "(default 20 with --sigma > 0, else 0)")
@@ -398,7 +409,7 @@ def _add_demo(sub: argparse._SubParsersAction) -> None:
     m = sub.add_parser("demo", help="render a few frames, detect markers and poses, print a table")
     m.add_argument("--out", default="visloc-demo", metavar="DIR", help="output folder (default ./visloc-demo)")
     m.add_argument("--frames", type=_count, default=6, help="number of frames (default 6)")
-    m.add_argument("--seed", type=int, default=7, help="random seed (default 7)")
+    m.add_argument("--seed", type=_seed, default=7, help="random seed (default 7)")
 
 
 def _source_and_camera(p: argparse.ArgumentParser) -> None:

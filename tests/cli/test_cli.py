@@ -302,3 +302,30 @@ def test_a_sub_command_imports_only_what_it_needs(tmp_path):
         out = subprocess.run([sys.executable, "-c", probe.format(argv=argv)], capture_output=True, text=True,
                              check=True).stdout.strip().splitlines()[-1]
         assert out == f"{code} []", (argv, out)
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["sim", "hover", "--seed", "-1"], "--seed: must be >= 0"),  # numpy's words, without the option, before
+    (["render", "markers", "{tmp}/v", "--n", "1", "--video"], "--n must be at least 2 for --video"),
+    (["detect", "{frame}", "--explain", "{tmp}/cam.yml"], "a file, not a folder"),  # [Errno 17] File exists
+    (["detect", "{frame}", "--out", "/proc/visloc-test/x.jsonl"], "cannot write /proc/visloc-test/x.jsonl"),
+    (["detect", "/dev/null"], "/dev/null is neither a file nor a folder"),  # "does not exist"
+    (["localize", "{frame}", "--camera", "{tmp}/cam.yml", "--map", "{tmp}/nan.yml"], "corners must be finite, got"),
+    (["calibrate", "{frame}", "--board", "{tmp}/cam.yml", "--out", "{tmp}/c.yml"],
+     "neither a ChArUco board file (board_type: charuco) nor a marker map"),
+])
+def test_messages_name_the_problem(rendered, tmp_path, capsys, argv, message):
+    from visloc.pose import Camera
+
+    Camera(np.array([[300.0, 0.0, 160.0], [0.0, 300.0, 120.0], [0.0, 0.0, 1.0]]), size=(320, 240)).to_file(
+        tmp_path / "cam.yml")
+    (tmp_path / "nan.yml").write_text("%YAML:1.0\nmarkers:\n  - { id: 0, corners: [ .nan, 0., 0., 0.1, 0., 0., "
+                                      "0.1, -0.1, 0., 0., -0.1, 0. ] }\n")
+    frame = min(rendered.glob("*.png"))
+    try:
+        code = main([a.format(tmp=tmp_path, frame=frame) for a in argv])
+    except SystemExit as exc:  # argparse's own checks
+        code = exc.code
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and message in err and "Errno" not in err and ".partial" not in err
+    assert not (tmp_path / "v").exists()

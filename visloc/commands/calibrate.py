@@ -31,8 +31,12 @@ GRID, COVERAGE = 4, 0.75
 def _board(path: str) -> CharucoBoard | MarkerBoard:
     """A ChArUco board file (``board_type: charuco``), or a marker map file as a board."""
     try:
-        if "board_type" in Path(path).read_text(errors="replace"):
+        text = Path(path).read_text(errors="replace")
+        if "board_type" in text:
             return CharucoBoard.from_file(path)
+        if "markers" not in text:
+            raise ValueError(f"--board {path}: neither a ChArUco board file (board_type: charuco) nor a marker map "
+                             "(a 'markers' list)")
         return MarkerBoard.from_file(path)
     except (ValueError, OSError, OverflowError) as exc:
         raise UsageError(str(exc)) from None

@@ -62,6 +62,8 @@ def detect(args: argparse.Namespace) -> int:
 
             link = stack.enter_context(MavlinkSink(args.mavlink))
         explain_dir = Path(args.explain) if args.explain else None
+        if explain_dir is not None and explain_dir.exists() and not explain_dir.is_dir():
+            raise UsageError(f"--explain {explain_dir}: a file, not a folder for the explanations")
         for frame in frames_of(source, args):
             n_frames += 1
             if frame.image is None:
@@ -130,6 +132,8 @@ def render(args: argparse.Namespace) -> int:
     from visloc.synth import render_dataset, render_video
 
     out = Path(args.outdir)
+    if args.video and args.n < 2:  # before the folder is made
+        raise UsageError(f"--n must be at least 2 for --video (a flight), got {args.n}")
     bar = tqdm(total=args.n, unit="frame", disable=None, file=sys.stderr)
     try:
         if args.video:

@@ -477,4 +477,6 @@ def open_source(spec: str | int | os.PathLike[str], *, fps: float | None = None,
             ) from None
     if _GLOB_CHARS & set(text):
         return _image_list(text, glob.glob(text, recursive=True), "glob", fps)
+    if os.path.exists(text):  # a device, a pipe, a socket
+        raise SourceError(f"{text} is neither a file nor a folder")
     raise SourceError(f"path does not exist: {text}")

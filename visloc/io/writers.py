@@ -109,8 +109,13 @@ def _open_text(path: str | os.PathLike[str], name: str, **kwargs: Any) -> tuple[
     p = Path(path)
     if p.is_dir():
         raise ValueError(f"{name} is a directory, expected a file path: {p}")
-    p.parent.mkdir(parents=True, exist_ok=True)
-    return p, open(staged_path(p), "w", encoding="utf-8", **kwargs)
+    try:
+        p.parent.mkdir(parents=True, exist_ok=True)
+        return p, open(staged_path(p), "w", encoding="utf-8", **kwargs)
+    except OSError as exc:  # named as the user gave it, not as its staged file
+        err = OSError(f"cannot write {p}: {exc.strerror or exc}")
+        err.errno = exc.errno
+        raise err from None
 
 
 def _close_text(file: TextIO, path: Path, count: int) -> None:

@@ -81,8 +81,10 @@ class MarkerMap:
             k = marker_id(k, "corners")
             arr = np.array(v, dtype=np.float64)  # a copy: the caller's array stays theirs
             arr.setflags(write=False)
-            if arr.shape != (4, 3) or not np.isfinite(arr).all():
-                raise ValueError(f"marker {k}: corners must be finite (4, 3), got shape {arr.shape}")
+            if arr.shape != (4, 3):
+                raise ValueError(f"marker {k}: corners must be (4, 3), got shape {arr.shape}")
+            if not np.isfinite(arr).all():
+                raise ValueError(f"marker {k}: corners must be finite, got {arr.tolist()}")
             try:
                 frame, _ = _marker_frame(arr)
             except ValueError as exc:

@@ -145,5 +145,9 @@ def check_int(value: object, name: str, *, low: int | None = None, high: int | N
         raise TypeError(f"{name} must be an int, got {type(value).__name__}")
     v = int(value)
     if (low is not None and v < low) or (high is not None and v > high):
+        if high is None:
+            raise ValueError(f"{name} must be >= {low}, got {v}")
+        if low is None:
+            raise ValueError(f"{name} must be <= {high}, got {v}")
         raise ValueError(f"{name} must be in [{low}, {high}], got {v}")
     return v

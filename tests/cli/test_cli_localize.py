@@ -180,3 +180,23 @@ def test_frames_before_the_first_fix_and_outside_the_truth_have_no_position_or_e
         cv2.imwrite(str(black / p.name), np.zeros((240, 320), np.uint8))
     assert main(["localize", str(black), *args[2:], "--out", str(tmp_path / "b.csv")]) == 0
     assert "no frame gave a position fix" in capsys.readouterr().err
+
+
+def test_a_map_id_its_dictionary_lacks_is_a_usage_error(tmp_path, capsys):
+    # localize used to accept it (and find nothing) while render map refused it
+    from visloc.pose import Camera, MarkerMap
+
+    square = np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.1, -0.1, 0.0], [0.0, -0.1, 0.0]])
+    Camera(np.array([[300.0, 0.0, 160.0], [0.0, 300.0, 120.0], [0.0, 0.0, 1.0]]), size=(320, 240)).to_file(
+        tmp_path / "cam.yml")
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    (frames / "f.png").write_bytes((tmp_path / "cam.yml").read_bytes())  # never read: the map is refused first
+    for ids in ([99], [-1], [3, 50]):
+        MarkerMap({i: square + (0.2 * k, 0.0, 0.0) for k, i in enumerate(ids)}, "DICT_4X4_50").to_file(tmp_path / "m.yml")
+        for argv in (["localize", str(frames), "--fps", "30", "--camera", str(tmp_path / "cam.yml")],
+                     ["render", "map"]):
+            code = main([*argv, "--map", str(tmp_path / "m.yml")] if argv[0] == "localize"
+                        else [*argv, str(tmp_path / "m.yml"), str(tmp_path / "s.png")])
+            bad = [i for i in ids if not 0 <= i < 50]
+            assert code == 2 and f"map ids {bad} are not in dictionary DICT_4X4_50 (ids 0 to 49)" in capsys.readouterr().err

@@ -21,7 +21,9 @@ def warn(command: str, text: str) -> None:
 def dictionary_for(args: argparse.Namespace, command: str, *maps) -> str:
     """The dictionary of a command that reads marker maps: ``--dict`` when given (a map that
     records another one is a :class:`visloc.cli.UsageError`), else the one the maps record,
-    else DICT_4X4_50 with a warning. Sets ``args.dict``."""
+    else DICT_4X4_50 with a warning. Sets ``args.dict``. A map id the dictionary does not
+    hold (negative, or beyond its size: no marker could ever be found) is a usage error."""
+    from visloc.markers.dictionary import load_dictionary
 
     recorded = {m.dictionary for m in maps if m.dictionary}
     if len(recorded) > 1:
@@ -34,6 +36,10 @@ def dictionary_for(args: argparse.Namespace, command: str, *maps) -> str:
     else:
         args.dict = "DICT_4X4_50"
         warn(command, "the map records no dictionary: using DICT_4X4_50 (give --dict)")
+    size = len(load_dictionary(args.dict))
+    bad = sorted({int(i) for m in maps for i in m.ids if not 0 <= i < size})
+    if bad:
+        raise UsageError(f"map ids {bad[:10]} are not in dictionary {args.dict} (ids 0 to {size - 1})")
     return args.dict
 
 

@@ -178,9 +178,6 @@ def render_map(args: argparse.Namespace) -> int:
     pts = np.concatenate([mmap.corners_of(int(i)) for i in mmap.ids])
     if np.abs(pts[:, 2]).max() > 1e-6:
         raise UsageError(f"map {args.map} has markers off the z = 0 plane: it cannot be printed as one sheet")
-    bad = [int(i) for i in mmap.ids if i >= len(dic)]
-    if bad:
-        raise UsageError(f"map ids {bad} are not in dictionary {args.dict} ({len(dic)} markers)")
     px_per_m = args.dpi / 0.0254
     margin = 0.02  # m of white around the outermost markers
     lo = pts[:, :2].min(axis=0) - margin

@@ -329,3 +329,16 @@ def test_messages_name_the_problem(rendered, tmp_path, capsys, argv, message):
     err = capsys.readouterr().err.strip()
     assert code == 2 and message in err and "Errno" not in err and ".partial" not in err
     assert not (tmp_path / "v").exists()
+
+
+@pytest.mark.parametrize("command, options, message", [
+    ("flow", "", "the following arguments are required: --camera"),
+    ("detect", "--max-frames 0", "--max-frames: must be at least 1"),
+])
+def test_batch_options_the_command_refuses_are_one_usage_error(rendered, tmp_path, capsys, command, options, message):
+    # each recording used to fail on its own (exit 1, one warning per recording)
+    out = tmp_path / "out"
+    code = main(["batch", command, str(rendered), str(rendered), "--options", options, "--outdir", str(out), "--quiet"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and message in err and f"for {command}" in err
+    assert not out.exists()

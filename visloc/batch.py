@@ -353,6 +353,21 @@ def load_dask():
     return dd
 
 
+def _check_options(command: str, recording: str, opts: list[str]) -> None:
+    """Parse ``opts`` as ``visloc COMMAND`` would, once, before any recording: a missing or
+    malformed option is one :class:`UsageError`, not a failure of every recording."""
+    from visloc.cli import build_parser
+
+    said = io.StringIO()
+    try:
+        with contextlib.redirect_stderr(said):
+            build_parser().parse_args([command, recording, *opts, "--out", "batch-check", "--quiet"])
+    except SystemExit:
+        lines = said.getvalue().strip().splitlines()
+        reason = lines[-1].split(": error: ", 1)[-1] if lines else "not valid"
+        raise UsageError(f"--options {shlex.join(opts)!r} for {command}: {reason}") from None
+
+
 def run_batch(command: str, recordings: Sequence[str], options: str | Sequence[str], outdir: str | os.PathLike[str],
               *, workers: int | None = None, scheduler: str | None = None, force: bool = False,
               chunk: int | None = None,
@@ -397,6 +412,13 @@ def run_batch(command: str, recordings: Sequence[str], options: str | Sequence[s
     -------
     list of RecordingResult
         Skipped ones first, then in the order they finished.
+
+    Raises
+    ------
+    visloc.errors.UsageError
+        ``options`` holding ``--out``, ``--quiet`` or ``--frame-range``, or options the
+        command's parser refuses (a missing or malformed option: said once, before any
+        recording); ``chunk`` with another command than ``detect`` or below 1.
     """
     opts = shlex.split(options) if isinstance(options, str) else list(options)
     if any(o in ("--out", "--quiet", "--frame-range") for o in opts):
@@ -404,6 +426,8 @@ def run_batch(command: str, recordings: Sequence[str], options: str | Sequence[s
                          "--frame-range out of --options")
     if chunk is not None and (command != "detect" or chunk < 1):
         raise UsageError("--chunk needs detect (the other commands carry a filter from frame to frame) and >= 1 frame")
+    if recordings:
+        _check_options(command, recordings[0], opts)
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     todo, results = plan(command, recordings, opts, out, force=force)

@@ -67,29 +67,6 @@ def _job(args: argparse.Namespace) -> None:
         args.options = ""
 
 
-def _check_options(command: str, recording: str, options: str) -> None:
-    """Parse ``options`` as ``visloc COMMAND`` would, once, before any recording: a missing
-    or malformed option is one usage error (exit 2), not a failure of every recording."""
-    import contextlib
-    import io
-    import shlex
-
-    from visloc.cli import build_parser
-    from visloc.errors import UsageError
-
-    opts = shlex.split(options)
-    if any(o in ("--out", "--quiet", "--frame-range") for o in opts):
-        return  # visloc.batch.run_batch names these
-    said = io.StringIO()
-    try:
-        with contextlib.redirect_stderr(said):
-            build_parser().parse_args([command, recording, *opts, "--out", "batch-check", "--quiet"])
-    except SystemExit:
-        lines = said.getvalue().strip().splitlines()
-        reason = lines[-1].split(": error: ", 1)[-1] if lines else "not valid"
-        raise UsageError(f"--options {options!r} for {command}: {reason}") from None
-
-
 def batch(args: argparse.Namespace) -> int:
     """``visloc batch``: run ``args.batch_command`` over ``args.recordings`` into ``args.outdir``.
 
@@ -108,8 +85,6 @@ def batch(args: argparse.Namespace) -> int:
 
     _job(args)
     recordings = _expand(args.recordings)
-    if recordings:
-        _check_options(args.batch_command, recordings[0], args.options)
     bar = tqdm(total=len(recordings), unit="recording", disable=True if args.quiet else None, file=sys.stderr)
 
     def progress(res) -> None:

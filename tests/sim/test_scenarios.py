@@ -103,6 +103,8 @@ def test_a_run_that_ends_before_its_step_has_no_step_metrics():
     r = simulate("sidestep", seconds=0.5)
     assert r.status is SimStatus.COMPLETED and r.t[-1] == pytest.approx(0.5)
     assert r.metrics["overshoot_pct"] is None and r.metrics["settling_time_s"] is None
+    at = simulate("sidestep", seconds=1.0)  # ends at the step: nothing after it to judge either
+    assert at.metrics["overshoot_pct"] is None and not any(k.startswith("linear_") for k in at.metrics)
     slam = Scenario("slam", "pushed into the floor before a step", 3.0, step=(2.5, np.array([0.0, 1.0, -1.0, 0.0])),
                     push=(0.2, 0.5, np.array([0.0, 0.0, 40.0])))
     r = simulate(slam)

@@ -360,8 +360,8 @@ def fly(scenario: Scenario, vehicle: Vehicle, controller: Controller, estimator:
     if sensors is not None:
         metrics.update(camera_frames=sensors.frames, vision_fixes=estimator.fixes,  # type: ignore[union-attr]
                        vision_misses=estimator.misses)  # type: ignore[union-attr]
-    if sc.step is not None and sc.trajectory is None and records[0][-1] >= sc.step[0]:  # the linear model's answer
-        # to the same set-point step (none when the run ended before the step)
+    if sc.step is not None and sc.trajectory is None and records[0][-1] > sc.step[0]:  # the linear model's answer
+        # to the same set-point step (none when the run ended at or before the step)
         metrics.update(step_metrics_linear(controller.gains, p, sc, duration))
     status, reason = ended if ended is not None else _ran_out(sc, metrics, duration)
     motors = {"c": [float(v) for v in vehicle.c], "d": [float(v) for v in vehicle.d]}

@@ -144,7 +144,7 @@ def run_metrics(sc: Scenario, t: FloatArray, states: FloatArray, estimates: Floa
     settle = settling_time(t, dist, sc.band, t0)
     overshoot = None
     size = 0.0 if sc.step is None else float(np.linalg.norm(sc.step[1][:3] - sc.start_setpoint[:3]))
-    if size > 0.0 and after.any():  # None before the step, and for a step of the heading alone
+    if size > 0.0 and (t > t0).any():  # None up to the step, and for a step of the heading alone
         start = sc.start_setpoint[:3]
         delta = sc.step[1][:3] - start
         travel = (states[after, :3] - start) @ (delta / size)

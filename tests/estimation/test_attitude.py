@@ -235,3 +235,9 @@ def test_gyro_integrator_skips_a_step_that_overflows():
     g = GyroIntegrator()
     assert g.update([1e308, 0.0, 0.0], 10.0) == (0.0, 0.0, 0.0) and g.skipped == 1
     assert g.update([0.1, 0.0, 0.0], 1.0) == pytest.approx((0.1, 0.0, 0.0))
+
+
+def test_accel_tilt_of_huge_readings_is_the_tilt_of_their_direction():
+    # the norm's squares overflowed to inf: pitch came out 0
+    big, unit = accel_tilt([3e200, 3e200, -3e200]), accel_tilt([3.0, 3.0, -3.0])
+    assert big == pytest.approx(unit, rel=1e-12) and big[1] == pytest.approx(math.asin(1 / math.sqrt(3)))

@@ -91,7 +91,7 @@ def accel_tilt(accel: object) -> tuple[float, float] | tuple[FloatArray, FloatAr
         raise ValueError(f"accel must have shape (3,) or (N, 3), got {f.shape}")
     if not np.all(np.isfinite(f)):
         raise ValueError("accel must be finite")
-    norm = np.linalg.norm(f, axis=-1)
+    norm = np.hypot(np.hypot(f[..., 0], f[..., 1]), f[..., 2])  # no overflow for huge readings, as norm's squares
     if np.any(norm < _TINY_NORM):
         raise ValueError("accel must have a non-zero norm (no tilt information in free fall)")
     roll = np.arctan2(-f[..., 1], -f[..., 2])  # report eq. (3.1), a = -f

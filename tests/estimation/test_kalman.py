@@ -388,3 +388,17 @@ def test_a_refused_predict_counts_no_dropped_input():
     assert kf.skipped["accel_input"] == 0 and kf.t == 0.0
     kf.predict(1.0, accel=[np.nan, 0.0])
     assert kf.skipped["accel_input"] == 1 and kf.t == 1.0
+
+
+def test_a_step_beyond_the_models_range_is_refused_and_changes_nothing():
+    # dt ** 4 overflowed (OverflowError); a denormal step made P NaN without a word
+    kf = PositionVelocityKF(2, model="cv")
+    kf.predict(0.0)
+    with pytest.raises(ValueError, match="dt: a step of 1e"):
+        kf.predict(1e100)
+    assert kf.t == 0.0 and np.isfinite(kf.P).all()
+    dense = PositionVelocityKF(2, model="cv", accel_noise_kind="density")
+    dense.predict(0.0)
+    with pytest.raises(ValueError, match="non-finite"):
+        dense.predict(5e-324)
+    assert np.isfinite(dense.P).all()

@@ -366,8 +366,14 @@ class PositionVelocityKF:
         if cached is None:  # a stream at a fixed rate asks for the same step again and again
             # F = kron(I, F_axis); Q = Q_discrete_white_noise(order, dt, var, block_size=dims),
             # built directly (the same values: this runs at every step of a jittered stream)
-            F = _block_diag(_axis_F(self.order, dt), self.dims)
-            Q = _block_diag(_axis_Q(self.order, dt), self.dims) * var
+            try:
+                with np.errstate(all="ignore"):  # judged below
+                    F = _block_diag(_axis_F(self.order, dt), self.dims)
+                    Q = _block_diag(_axis_Q(self.order, dt), self.dims) * var
+            except OverflowError:  # dt ** 4 beyond float's range
+                raise ValueError(f"dt: a step of {dt:g} s is beyond what the filter's model can hold") from None
+            if not (np.isfinite(F).all() and np.isfinite(Q).all()):
+                raise ValueError(f"dt: a step of {dt:g} s gives a non-finite transition or process noise")
             B = None
             if self.order == 2:
                 B = np.zeros((self.dim_x, self.dims))
@@ -403,7 +409,8 @@ class PositionVelocityKF:
         ------
         ValueError
             ``t`` not finite or earlier than the last time ("out-of-order timestamp"), bad
-            ``accel`` shape, ``accel`` with ``model="ca"``.
+            ``accel`` shape, ``accel`` with ``model="ca"``; a step from the last time so long or
+            so short that the model's ``F`` or ``Q`` is not finite (nothing changes then).
         """
         t = check_real(t, "t")
         u = None

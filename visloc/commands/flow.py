@@ -86,6 +86,32 @@ def _skip(out, row: dict, reason: str, warning: str | None = None) -> None:
         out.write(row | {"quality": 0.0, "reason": reason})
 
 
+def _height_or_skip(frame, height: float | None, heights: dict[int, float] | None
+                    ) -> tuple[float | None, tuple[str, str] | None]:
+    """The frame's height (``--height``, or its ``--height-csv`` row), and, for a frame the
+    run skips (unreadable, no height, under 16 x 16 px), its ``(reason, warning)``."""
+    if frame.image is None:
+        return None, (f"unreadable: {frame.error}", frame.error or f"cannot read {frame.name}")
+    if heights is not None:
+        height = heights.get(frame.index)
+        if height is None:
+            reason = f"--height-csv has no height for frame {frame.index}"
+            return None, (reason, reason)
+    if min(frame.image.shape[:2]) < 16:  # the block flow needs 16 x 16 px
+        reason = f"{frame.image.shape[1]} x {frame.image.shape[0]} px, smaller than 16 x 16"
+        return None, (reason, f"{frame.name}: {reason}; skipped")
+    return height, None
+
+
+def _say_unused(args: argparse.Namespace, gyro_log, gyro_used: int, pairs: int, unmeasured: int) -> None:
+    """Warn about an ``--imu`` log outside the frames' times and a run that measured no pair."""
+    if gyro_log is not None and pairs and not gyro_used:
+        warn("flow", f"--imu {args.imu or args.imu_topic}: its times {gyro_log[0, 0]:g} .. {gyro_log[-1, 0]:g} s do not "
+                     "overlap the frame pairs': the IMU was not used")
+    if pairs and unmeasured == pairs:
+        warn("flow", f"no motion could be measured in any of the {pairs} frame pairs (too little texture?)")
+
+
 def flow(args: argparse.Namespace) -> int:
     """``visloc flow``: ground velocity and integrated track of a downward camera.
 
@@ -125,21 +151,10 @@ def flow(args: argparse.Namespace) -> int:
         for frame in frames_of(source, args):
             n_frames += 1
             row = {"frame": frame.index, "time": frame.time, "source": frame.name}
-            if frame.image is None:
+            height, skipped = _height_or_skip(frame, args.height, heights)
+            if skipped is not None:  # recorded and skipped, the run goes on
                 failed += 1
-                _skip(out, row, f"unreadable: {frame.error}", frame.error or f"cannot read {frame.name}")
-                continue
-            height = args.height
-            if heights is not None:
-                height = heights.get(frame.index)
-                if height is None:  # this frame is skipped, the run goes on
-                    failed += 1
-                    _skip(out, row, f"--height-csv has no height for frame {frame.index}")
-                    continue
-            if min(frame.image.shape[:2]) < 16:  # the block flow needs 16 x 16 px
-                failed += 1
-                reason = f"{frame.image.shape[1]} x {frame.image.shape[0]} px, smaller than 16 x 16"
-                _skip(out, row, reason, f"{frame.name}: {reason}; skipped")
+                _skip(out, row, *skipped)
                 continue
             cam = camera_for(camera, frame.image.shape, warned, "flow")
             if ego is None or ego.frame_shape != frame.image.shape[:2]:
@@ -177,11 +192,7 @@ def flow(args: argparse.Namespace) -> int:
                 rec.log_flow(frame.index, frame.time, frame.image, ego.last_field, gv, (x, y))
             if link is not None:
                 link.send_optical_flow(frame.time, dt, gv.v, height, gv.quality, gyro=gyro)
-    if gyro_log is not None and pairs and not gyro_used:
-        warn("flow", f"--imu {args.imu or args.imu_topic}: its times {gyro_log[0, 0]:g} .. {gyro_log[-1, 0]:g} s do not "
-                     "overlap the frame pairs': the IMU was not used")
-    if pairs and unmeasured == pairs:
-        warn("flow", f"no motion could be measured in any of the {pairs} frame pairs (too little texture?)")
+    _say_unused(args, gyro_log, gyro_used, pairs, unmeasured)
     if not args.quiet:
         ms = f", median {1e3 * float(np.median(times)):.2f} ms per pair" if times else ""
         q = f", median quality {float(np.median(qualities)):.2f}" if qualities else ""

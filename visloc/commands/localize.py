@@ -148,17 +148,10 @@ def localize(args: argparse.Namespace) -> int:
             if mp is not None:  # the pose's own covariance, floored (visloc.estimation.fusion)
                 fix = "used" if fusion.fix(mp.position, mp.position_covariance) else "rejected"
                 fixes += fix == "used"
-            row |= {"markers": len(mp.used) if mp is not None else 0, "fix": fix}
-            pos = None  # no estimate before the first fix: the columns stay empty (the prior is no position)
-            if fusion.fixes:
-                pos, vel, sd = fusion.position, fusion.velocity, fusion.position_std
-                row |= {"x": pos[0], "y": pos[1], "z": pos[2], "vx": vel[0], "vy": vel[1], "vz": vel[2],
-                        "std_x": sd[0], "std_y": sd[1], "std_z": sd[2]}
-            true_pos = None
-            if truth is not None and truth["t"][0] <= frame.time <= truth["t"][-1]:  # no clamped truth outside
-                true_pos = np.array([np.interp(frame.time, truth["t"], truth[k]) for k in ("x", "y", "z")])
-            elif truth is not None:
-                outside += 1
+            columns, pos = _estimate(fusion)
+            row |= {"markers": len(mp.used) if mp is not None else 0, "fix": fix} | columns
+            true_pos = _truth_at(truth, frame.time)
+            outside += truth is not None and true_pos is None
             if true_pos is not None and pos is not None:
                 row["error_m"] = float(np.linalg.norm(pos - true_pos))
                 errors.append(row["error_m"])
@@ -168,6 +161,37 @@ def localize(args: argparse.Namespace) -> int:
                 _send_fix(link, args, fusion, mp.R_map_cam, frame.time)
             if rec:
                 rec.log_localize(frame.index, frame.time, frame.image, pos, true_pos)
+    _say_unused(args, imu, imu_used, frame_times, truth, outside, fixes if n_frames > failed else None)
+    if not args.quiet:
+        err = f", median position error {1e3 * float(np.median(errors)):.1f} mm" if errors else ""
+        used = f", IMU between {imu_used} frame pairs" if imu is not None else ""
+        print(f"visloc localize: {n_frames} frames, {fixes} position fixes, {failed} unreadable{used}{err}",
+              file=sys.stderr)
+    return 1 if failed else 0
+
+
+def _estimate(fusion) -> tuple[dict, np.ndarray | None]:
+    """The filter's position, velocity and standard deviation columns, and its position;
+    none before its first fix (its prior is no position)."""
+    if not fusion.fixes:
+        return {}, None
+    pos, vel, sd = fusion.position, fusion.velocity, fusion.position_std
+    return {"x": pos[0], "y": pos[1], "z": pos[2], "vx": vel[0], "vy": vel[1], "vz": vel[2],
+            "std_x": sd[0], "std_y": sd[1], "std_z": sd[2]}, pos
+
+
+def _truth_at(truth: dict[str, np.ndarray] | None, t: float) -> np.ndarray | None:
+    """The ``--truth`` position at time ``t`` (interpolated), None outside its times (not
+    clamped to its first or last row) or without a truth file."""
+    if truth is None or not truth["t"][0] <= t <= truth["t"][-1]:
+        return None
+    return np.array([np.interp(t, truth["t"], truth[k]) for k in ("x", "y", "z")])
+
+
+def _say_unused(args: argparse.Namespace, imu, imu_used: int, frame_times: list[float],
+                truth: dict[str, np.ndarray] | None, outside: int, fixes: int | None) -> None:
+    """Warn about inputs a run could not use: an IMU log outside the frames' times, frames
+    outside the truth's, no fix at all (``fixes`` None: no frame was read)."""
     if imu is not None and len(frame_times) > 1 and imu_used == 0:
         warn("localize", f"--imu {args.imu or args.imu_topic}: its times {imu[0, 0]:g} .. {imu[-1, 0]:g} s do not overlap the frames' "
                          f"{frame_times[0]:g} .. {frame_times[-1]:g} s (or no frame had a fix to turn it into the "
@@ -175,14 +199,8 @@ def localize(args: argparse.Namespace) -> int:
     if truth is not None and outside:
         warn("localize", f"--truth {args.truth}: its times {truth['t'][0]:g} .. {truth['t'][-1]:g} s leave out "
                          f"{outside} frame(s); their error_m is empty")
-    if n_frames > failed and fixes == 0:
+    if fixes == 0:
         warn("localize", "no frame gave a position fix (no map marker found): the position columns are empty")
-    if not args.quiet:
-        err = f", median position error {1e3 * float(np.median(errors)):.1f} mm" if errors else ""
-        used = f", IMU between {imu_used} frame pairs" if imu is not None else ""
-        print(f"visloc localize: {n_frames} frames, {fixes} position fixes, {failed} unreadable{used}{err}",
-              file=sys.stderr)
-    return 1 if failed else 0
 
 
 def _map_finder(args: argparse.Namespace, mmap: MarkerMap) -> Callable[[np.ndarray, Camera, Pose | None], list]:

@@ -48,13 +48,7 @@ def _at_most(limit: float, why: str):
 
 def _seed(text: str) -> int:
     """An argparse type: a random seed, a whole number >= 0 (numpy's seeds)."""
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0 (a random seed), got {text!r}")
-    return v
+    return _whole(text, 0, " (a random seed)")
 
 
 #: most frames ``render localize`` and ``render flow`` hold in memory (seconds x fps)
@@ -95,14 +89,19 @@ def _frame_range(text: str) -> tuple[int, int | None]:
     return start, stop
 
 
-def _count(text: str) -> int:
+def _whole(text: str, low: int, note: str = "") -> int:
+    """A whole number of at least ``low`` (``note`` says what it is), or an argparse error."""
     try:
         v = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {text!r}")
+    if v < low:
+        raise argparse.ArgumentTypeError(f"must be at least {low}{note}, got {text!r}")
     return v
+
+
+def _count(text: str) -> int:
+    return _whole(text, 1)
 
 
 class _Parser(argparse.ArgumentParser):

@@ -53,13 +53,19 @@ def test_render_map_makes_a_detectable_sheet(tmp_path):
     assert isinstance(MarkerMap.from_file(tmp_path / "ref.yml"), MarkerMap)
 
 
-def test_track_needs_fps_for_an_image_folder(tmp_path, capsys):
+def _one_blank_frame_and_files(tmp_path):
+    """A folder of one blank frame, body.yml, ref.yml and cam.yml in ``tmp_path``; the folder."""
     frames = tmp_path / "frames"
     frames.mkdir()
     cv2.imwrite(str(frames / "f0.png"), np.zeros((48, 64), np.uint8))
     BODY.to_file(tmp_path / "body.yml")
     REFERENCE.to_file(tmp_path / "ref.yml")
     write_camera_yml(tmp_path / "cam.yml", default_camera(SIZE), SIZE)
+    return frames
+
+
+def test_track_needs_fps_for_an_image_folder(tmp_path, capsys):
+    frames = _one_blank_frame_and_files(tmp_path)
     code = main(["track", str(frames), "--camera", str(tmp_path / "cam.yml"), "--body", str(tmp_path / "body.yml"),
                  "--reference", str(tmp_path / "ref.yml"), "--quiet"])
     assert code == 2
@@ -93,12 +99,7 @@ def test_requests_it_cannot_meet_are_one_line_errors_before_any_work(tmp_path, c
 ])
 def test_track_options_it_cannot_use_are_usage_errors(tmp_path, capsys, maps, poles, message):
     # they used to end in an "internal error" (exit 3) at the first frame with the body in view
-    frames = tmp_path / "frames"
-    frames.mkdir()
-    cv2.imwrite(str(frames / "f0.png"), np.zeros((48, 64), np.uint8))
-    BODY.to_file(tmp_path / "body.yml")
-    REFERENCE.to_file(tmp_path / "ref.yml")
-    write_camera_yml(tmp_path / "cam.yml", default_camera(SIZE), SIZE)
+    frames = _one_blank_frame_and_files(tmp_path)
     code = main(["track", str(frames), "--fps", "30", "--camera", str(tmp_path / "cam.yml"),
                  "--body", str(tmp_path / f"{maps[0]}.yml"), "--reference", str(tmp_path / f"{maps[1]}.yml"),
                  "--poles", *poles, "--quiet"])

@@ -104,6 +104,15 @@ def _count(text: str) -> int:
     return _whole(text, 1)
 
 
+def _demo_frames(text: str) -> int:
+    """``demo --frames``: 1 to 1000 (a demonstration; ``visloc render markers`` makes datasets)."""
+    v = _whole(text, 1)
+    if v > 1000:
+        raise argparse.ArgumentTypeError(f"must be at most 1000 (a demonstration: 'visloc render markers' "
+                                         f"makes datasets), got {text!r}")
+    return v
+
+
 class _Parser(argparse.ArgumentParser):
     """An argument parser whose errors are one line on stderr (exit status 2)."""
 
@@ -407,7 +416,7 @@ def _add_demo(sub: argparse._SubParsersAction) -> None:
     """The ``visloc demo`` sub-command's arguments."""
     m = sub.add_parser("demo", help="render a few frames, detect markers and poses, print a table")
     m.add_argument("--out", default="visloc-demo", metavar="DIR", help="output folder (default ./visloc-demo)")
-    m.add_argument("--frames", type=_count, default=6, help="number of frames (default 6)")
+    m.add_argument("--frames", type=_demo_frames, default=6, help="number of frames, 1-1000 (default 6)")
     m.add_argument("--seed", type=_seed, default=7, help="random seed (default 7)")
 
 

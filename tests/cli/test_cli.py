@@ -305,7 +305,8 @@ def test_a_sub_command_imports_only_what_it_needs(tmp_path):
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["sim", "hover", "--seed", "-1"], "--seed: must be at least 0 (a random seed)"),  # numpy's words, without the option, before
+    (["sim", "hover", "--seed", "-1"], "--seed: must be at least 0 (a random seed)"),
+    (["demo", "--frames", "1000000"], "--frames: must be at most 1000"),  # ran for hours before  # numpy's words, without the option, before
     (["render", "markers", "{tmp}/v", "--n", "1", "--video"], "--n must be at least 2 for --video"),
     (["detect", "{frame}", "--explain", "{tmp}/cam.yml"], "a file, not a folder"),  # [Errno 17] File exists
     (["detect", "{frame}", "--out", "/proc/visloc-test/x.jsonl"], "cannot write /proc/visloc-test/x.jsonl"),

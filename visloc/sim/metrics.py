@@ -132,8 +132,8 @@ def run_metrics(sc: Scenario, t: FloatArray, states: FloatArray, estimates: Floa
     -------
     dict
         ``settling_time_s`` (s, or None), ``overshoot_pct`` (% of the step; None without a
-        step, before it, or for a step that does not move the position), ``position_rms_m``, ``max_error_m`` (the largest distance from the set point
-        or the moving reference), ``final_error_m``, ``height_dip_m``, ``estimate_rms_m``
+        step, up to it, or for a step that does not move the position), ``position_rms_m``,
+        ``max_error_m`` (the largest distance from the set point or the moving reference), ``final_error_m``, ``height_dip_m``, ``estimate_rms_m``
         (m), ``max_tilt_deg`` (largest roll or pitch, degrees), ``saturated_fraction`` (0-1)
         and ``realtime_factor`` (simulated over wall-clock seconds; inf when ``wall`` is 0).
     """

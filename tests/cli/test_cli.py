@@ -309,6 +309,7 @@ def test_a_sub_command_imports_only_what_it_needs(tmp_path):
     (["demo", "--frames", "1000000"], "--frames: must be at most 1000"),  # ran for hours before  # numpy's words, without the option, before
     (["render", "markers", "{tmp}/v", "--n", "1", "--video"], "--n must be at least 2 for --video"),
     (["detect", "{frame}", "--explain", "{tmp}/cam.yml"], "a file, not a folder"),  # [Errno 17] File exists
+    (["detect", "{frame}", "--annotate", "{tmp}/v/a.txt"], "names a .txt file"),  # made a folder named a.txt
     (["detect", "{frame}", "--out", "/proc/visloc-test/x.jsonl"], "cannot write /proc/visloc-test/x.jsonl"),
     (["detect", "/dev/null"], "/dev/null is neither a file nor a folder"),  # "does not exist"
     (["localize", "{frame}", "--camera", "{tmp}/cam.yml", "--map", "{tmp}/nan.yml"], "corners must be finite, got"),

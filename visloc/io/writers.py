@@ -287,6 +287,11 @@ def _frame_stem(name: str) -> str:
     return stem or "frame"
 
 
+#: suffixes of files an annotation folder is not named with (``--annotate out.png`` is a mistake)
+_FILE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".txt", ".csv", ".json",
+                            ".jsonl", ".yml", ".yaml", ".rrd", ".mkv", ".mov", ".webm", ".gif"})
+
+
 class AnnotationSink(Closing):
     """Save annotated frames as a video or as one PNG per frame.
 
@@ -307,8 +312,9 @@ class AnnotationSink(Closing):
     Raises
     ------
     ValueError
-        If ``fps`` is not positive, ``target`` is an existing file that is not a video, or a
-        ``.mp4`` / ``.avi`` target is an existing folder.
+        If ``fps`` is not positive, ``target`` is an existing file that is not a video, a
+        ``.mp4`` / ``.avi`` target is an existing folder, or a new ``target`` is named as
+        another kind of file (``.png``, ``.txt``, ``.mkv``, ...).
     """
 
     def __init__(self, target: str | os.PathLike[str], fps: float = 30.0) -> None:
@@ -337,6 +343,9 @@ class AnnotationSink(Closing):
                 raise ValueError(
                     f"target must be a folder or a .mp4/.avi file, got existing file {target}"
                 )
+            if not self.target.exists() and suffix in _FILE_SUFFIXES:  # a file's name, not a folder's
+                raise ValueError(f"target {target} names a {suffix} file: give a folder for PNG files, or a "
+                                 ".mp4/.avi file for a video")
             self.target.mkdir(parents=True, exist_ok=True)
 
     @property

@@ -178,3 +178,21 @@ def test_a_frame_stamped_before_the_last_is_recorded_and_the_run_goes_on(flight,
     rows = list(csv.DictReader((tmp_path / "f.csv").open()))
     assert len(rows) == len(frames) and "not after the previous frame's" in rows[3]["reason"]
     assert float(rows[4]["quality"]) > 0  # the next pair spans frames 2 and 4
+
+
+def test_strided_frames_are_written_whole_and_a_bad_frame_starts_no_file(tmp_path):
+    # the message's step came from a slice's own strides (its data from the contiguous copy):
+    # the bag could not be read back; a bad later frame left a half-written, unindexed bag
+    img = (np.arange(240 * 320) % 251).astype(np.uint8).reshape(240, 320)
+    for name, frame in (("strided", img[::2, ::2]), ("fortran", np.asfortranarray(img)), ("flipped", img[::-1]),
+                        ("bgr", np.dstack([img, img, img])[:, ::2])):
+        for fmt in ("ros1", "ros2"):
+            path = write_bag(tmp_path / f"{name}_{fmt}{'.bag' if fmt == 'ros1' else ''}", [frame], [0.0], fmt=fmt,
+                             encoding="bgr8" if frame.ndim == 3 else "mono8")
+            (got,) = list(open_source(path))
+            assert got.error is None and np.array_equal(got.image, frame)
+    with pytest.raises(ValueError, match=r"frames\[1\]"):
+        write_bag(tmp_path / "bad.bag", [img, np.zeros((4, 4, 5), np.uint8)], [0.0, 0.1])
+    assert not (tmp_path / "bad.bag").exists()
+    with pytest.raises(SourceError, match="no such file"):
+        BagSource(tmp_path / "missing.bag")  # FileNotFoundError before

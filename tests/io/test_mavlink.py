@@ -255,3 +255,31 @@ def test_flow_with_an_imu_sends_the_gyro_integrals_and_the_rotation_back_in_the_
         # the CSV's velocity has the roll and pitch rotation removed; the message puts it back
         assert m.integrated_x == pytest.approx(-float(r["vy"]) * dt / h + w[0], rel=1e-5, abs=1e-8)
         assert m.integrated_y == pytest.approx(float(r["vx"]) * dt / h + w[1], rel=1e-5, abs=1e-8)
+
+
+def test_odometry_of_a_nan_quality_is_invalid_and_a_bad_call_sends_nothing():
+    # min(100, nan) sent a NaN quality as 100; a bad attitude raised after the heartbeat went out
+    port = _free_port()
+    rx = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", dialect="common")
+    with MavlinkSink(f"udpout:127.0.0.1:{port}") as link:
+        with pytest.raises(IndexError):
+            link.send_odometry(1.0, (0.0, 0.0, -1.0), np.eye(2), (0.0, 0.0, 0.0))
+        assert link.sent == {}
+        link.send_odometry(1.0, (0.0, 0.0, -1.0), np.eye(3), (0.0, 0.0, 0.0), quality=math.nan)
+        link.send_odometry(1.1, (0.0, 0.0, -1.0), np.eye(3), (0.0, 0.0, 0.0), quality=150)
+    odo = [m for m in _receive(rx) if m.get_type() == "ODOMETRY"]
+    rx.close()
+    assert [m.quality for m in odo] == [0, 100]
+
+
+def test_a_jump_of_the_frame_clock_costs_one_beat_not_a_loop_per_period():
+    # the schedule used to be caught up one period at a time: minutes for epoch seconds,
+    # for ever beyond 2^53 s
+    import time
+
+    with MavlinkSink(f"udpout:127.0.0.1:{_free_port()}") as link:
+        start = time.perf_counter()
+        for t in (0.0, 1.0, 1.7e9, 1.7e9 + 0.5, 1.7e9 + 1.0, 1e20):
+            link.heartbeat(t)
+        assert time.perf_counter() - start < 1.0
+        assert link.sent["HEARTBEAT"] == 5  # 0, 1, 1.7e9, 1.7e9 + 1 and 1e20

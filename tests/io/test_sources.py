@@ -298,3 +298,10 @@ def test_frame_times_go_on_from_the_last_stamp_when_the_stamps_stop_being_usable
     assert [none.time(k, math.nan) for k in range(3)] == pytest.approx([0.0, 0.04, 0.08])
     given = _FrameClock(10.0, stamps=False)  # --fps given: index / fps whatever the stamps
     assert [given.time(k, 5.0 + k) for k in range(3)] == pytest.approx([0.0, 0.1, 0.2])
+
+
+def test_one_path_is_not_a_list_of_paths():
+    # ImageListSource("a.png") was five one-letter paths
+    with pytest.raises(TypeError, match=r"pass \['a.png'\]"):
+        ImageListSource("a.png")
+    assert len(ImageListSource(["a.png"])) == 1

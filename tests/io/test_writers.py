@@ -154,3 +154,11 @@ def test_keys_with_one_json_form_and_a_video_target_that_is_a_folder_are_refused
     (tmp_path / "ann.mp4").mkdir()
     with pytest.raises(ValueError, match="is a folder"):
         AnnotationSink(tmp_path / "ann.mp4")
+
+
+def test_long_doubles_are_floats_in_json():
+    # item() of np.longdouble is an np.longdouble again: to_jsonable recursed for ever
+    assert to_jsonable(np.longdouble(1.5)) == 1.5
+    assert to_jsonable(np.array([1.5, np.nan], np.longdouble)) == [1.5, None]
+    with pytest.raises(TypeError, match="clongdouble"):
+        to_jsonable(np.clongdouble(1 + 2j))

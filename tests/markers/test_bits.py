@@ -231,3 +231,12 @@ def test_cell_white_fractions_checks_corners_and_thresholds(native):
     white = cell_white_fractions(gray, quads, 6, [100.0, 120.0, 200.0], native=native)
     assert np.array_equal(white, np.repeat([1.0, 1.0, 0.0], 36).reshape(3, 6, 6))
     assert cell_white_fractions(gray, np.zeros((0, 4, 2)), 6, [], native=native).shape == (0, 6, 6)
+
+
+@pytest.mark.parametrize("native", [None, False])
+def test_no_candidates_read_as_no_reads(native):
+    # read_cells of an empty batch used to fail on a reshape (it has a branch for exactly this)
+    img = np.zeros((50, 50), np.uint8)
+    sample, read = read_cells(img, np.zeros((0, 4, 2)), 6, native=native)
+    assert sample.cells.shape == (0, 6, 6) and read.bits.shape == (0, 4, 4) and read.valid.shape == (0,)
+    assert read_bits(sample).threshold.shape == (0,)

@@ -227,3 +227,22 @@ def test_a_large_square_under_a_light_gradient_keeps_its_corners(native):
     assert errs["side"] < 0.05 and errs["auto"] < 0.05
     with pytest.raises(ValueError, match="levels"):
         refine_quads(img, start[None], levels="quad")
+
+
+def test_edge_stages_refuse_what_they_cannot_read_instead_of_crashing():
+    # quads off the image cropped it to nothing, and OpenCV then read memory it does not own
+    # (a segmentation fault); an empty image gave uninitialised profiles
+    from visloc.markers.refine import bend_corners
+
+    img = np.full((240, 320), 200, np.uint8)
+    far = np.array([[1100.0, 1100.0], [1150.0, 1100.0], [1150.0, 1150.0], [1100.0, 1150.0]])
+    np.testing.assert_array_equal(bend_corners(img, far)[0], far)  # nothing to bend: kept
+    for q in (far, far * 1e300):
+        with pytest.raises(ValueError, match="none reaches"):
+            edge_points(img, q, radius=2)
+    with pytest.raises(ValueError, match="finite"):
+        bend_corners(img, far * np.nan)
+    with pytest.raises(ValueError, match="non-empty"):
+        sample_edge_profiles(np.zeros((0, 0), np.uint8), far, 2)
+    inside = far - 1000.0  # still refined
+    assert bend_corners(img, inside).shape == (1, 4, 2)

@@ -102,6 +102,14 @@ def test_confirm_wants_the_expected_id_and_orientation(flight):
     turned = np.roll(quads, 1, axis=1)  # corner 0 not the marker's own top-left
     assert all(g is None for g in detector.confirm(frames[0], turned, ids))
     assert detector.confirm(frames[0], np.zeros((0, 4, 2)), []) == []
+    # ids are whole numbers, as the tracker's: int() used to make 3.7 marker 3 and "3" too
+    assert detector.confirm(frames[0], quads[:1], ids[:1].astype(float))[0] is not None
+    with pytest.raises(ValueError, match="whole numbers"):
+        detector.confirm(frames[0], quads[:1], ids[:1] + 0.7)
+    with pytest.raises(TypeError, match="whole numbers"):
+        detector.confirm(frames[0], quads[:1], [str(ids[0])])
+    with pytest.raises(ValueError, match="2 x 2"):  # the image is checked with no quads too
+        detector.confirm(np.zeros((0, 0), np.uint8), np.zeros((0, 4, 2)), [])
 
 
 def test_bad_input_is_named():

@@ -80,8 +80,10 @@ def _rosbags():
 def _open(path: str | os.PathLike[str]):
     """An open ``rosbags`` reader (a ``SourceError`` naming the file when it cannot be read)."""
     AnyReader, store = _rosbags()
-    reader = AnyReader([Path(path)], default_typestore=store)
+    if not Path(path).exists():
+        raise SourceError(f"cannot read the recording {os.fspath(path)}: no such file or folder")
     try:
+        reader = AnyReader([Path(path)], default_typestore=store)
         reader.open()
     except Exception as exc:  # noqa: BLE001 - rosbags raises its own per-format errors
         raise SourceError(f"cannot read the recording {os.fspath(path)}: {exc}") from None
@@ -355,9 +357,10 @@ def _image_message(store, img: NDArray[np.uint8], header, encoding: str):
         img = img if img.ndim == 2 else cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
     else:
         raise ValueError(f"encoding must be mono8, bgr8, rgb8, png or jpeg, got {encoding!r}")
+    img = np.ascontiguousarray(img)  # the step below is the written rows' (a slice's own strides are not)
     h, w = img.shape[:2]
     return store.types["sensor_msgs/msg/Image"](header=header, height=h, width=w, encoding=encoding, is_bigendian=0,
-                                                 step=img.strides[0], data=np.ascontiguousarray(img).reshape(-1))
+                                                 step=img.strides[0], data=img.reshape(-1))
 
 
 def _imu_message(store, row: NDArray, header):
@@ -403,6 +406,12 @@ def write_bag(path: str | os.PathLike[str], frames: list[NDArray[np.uint8]], tim
     -------
     Path
         ``path``.
+
+    Raises
+    ------
+    ValueError
+        ``fmt`` or ``encoding`` unknown, as many times as frames not given, or a frame that is
+        not a uint8 grey or BGR image (checked before the file is begun).
     """
     from rosbags.rosbag1 import Writer as Ros1Writer
     from rosbags.rosbag2 import StoragePlugin
@@ -413,6 +422,11 @@ def write_bag(path: str | os.PathLike[str], frames: list[NDArray[np.uint8]], tim
         raise ValueError(f"fmt must be ros1, ros2 or mcap, got {fmt!r}")
     if len(frames) != len(times):
         raise ValueError(f"{len(frames)} frames but {len(times)} times")
+    for k, f in enumerate(frames):  # all checked before the file is begun: no half-written bag
+        if not (isinstance(f, np.ndarray) and f.dtype == np.uint8 and f.size
+                and (f.ndim == 2 or f.ndim == 3 and f.shape[2] == 3)):
+            raise ValueError(f"frames[{k}]: expected a uint8 (H, W) or (H, W, 3) image, got "
+                             f"{getattr(f, 'dtype', type(f).__name__)} {getattr(f, 'shape', '')}")
     ros1 = fmt == "ros1"
     store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
     img_type = "sensor_msgs/msg/CompressedImage" if encoding in ("png", "jpeg") else "sensor_msgs/msg/Image"

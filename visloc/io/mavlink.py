@@ -249,9 +249,12 @@ class MavlinkSink:
         if due is None or time_s < due - self._period:  # the first beat, or the clock went back
             self._next_beat = time_s + self._period
             return
-        self._next_beat = due + self._period
-        while self._next_beat <= time_s:  # a gap in the frames: the next beat is still ahead
-            self._next_beat += self._period
+        nxt = due + self._period
+        if nxt <= time_s:  # a gap in the frames: the next beat of the same schedule after now
+            nxt = due + self._period * (math.floor((time_s - due) / self._period) + 1)  # not a loop per beat missed
+            if not nxt > time_s:  # a time beyond float's resolution of the schedule
+                nxt = time_s + self._period
+        self._next_beat = nxt
 
     def send_vision_position(self, time_s: float, position_ned: ArrayLike, rpy: Sequence[float], *,
                              covariance: ArrayLike | None = None, reset_counter: int = 0) -> None:
@@ -296,17 +299,19 @@ class MavlinkSink:
         reset_counter : int
             As :meth:`send_vision_position`.
         quality : int
-            0 (invalid) .. 100 (best).
+            0 (invalid) .. 100 (best); clipped to that range, NaN sent as 0.
         """
         m = self._mav
         p = [float(v) for v in np.asarray(position_ned, float).reshape(3)]
         v = [float(u) for u in np.asarray(velocity_ned, float).reshape(3)]
-        self.heartbeat(time_s)
-        self._send(m.MAVLink_odometry_message(
+        q = float(quality)
+        message = m.MAVLink_odometry_message(  # built, with its arguments' checks, before anything goes out
             _usec(time_s), m.MAV_FRAME_LOCAL_NED, m.MAV_FRAME_LOCAL_NED, *p, _quaternion(np.asarray(R_ned_body, float)),
             *v, math.nan, math.nan, math.nan, _upper_triangle(pose_covariance),
             _upper_triangle(velocity_covariance), int(reset_counter) % 256, m.MAV_ESTIMATOR_TYPE_VISION,
-            int(max(0, min(100, quality)))))
+            int(max(0.0, min(100.0, q))) if math.isfinite(q) else 0)  # min(100, nan) would be 100
+        self.heartbeat(time_s)
+        self._send(message)
 
     def send_landing_target(self, time_s: float, position_cam: ArrayLike, size_m: float, *, target_num: int = 0,
                             R_body_cam: ArrayLike = DOWN_CAMERA) -> None:

@@ -196,11 +196,18 @@ class ImageListSource(FrameSource):
         Frame rate used for ``time``.
     description : str, optional
         Summary; defaults to ``"<n> images"``.
+
+    Raises
+    ------
+    TypeError
+        ``paths`` is one path (a str, bytes or path object), not a sequence of them.
     """
 
     def __init__(
         self, paths: Sequence[str], *, fps: float | None = None, description: str | None = None
     ) -> None:
+        if isinstance(paths, (str, bytes, os.PathLike)):  # a str would be a list of one-letter paths
+            raise TypeError(f"paths: expected a sequence of image paths, got one path {paths!r}: pass [{paths!r}]")
         self.paths: list[str] = [os.fspath(p) for p in paths]
         self.fps = _check_fps(fps)
         super().__init__(description or f"{len(self.paths)} images")

@@ -69,8 +69,15 @@ def to_jsonable(obj: Any, _where: str = "obj") -> Any:
     if isinstance(obj, float):
         return obj if math.isfinite(obj) else None
     if isinstance(obj, np.generic):
-        return to_jsonable(obj.item(), _where)
+        item = obj.item()
+        if isinstance(item, np.generic):  # np.longdouble and its complex: item() is numpy's again
+            if not isinstance(item, np.floating):
+                raise TypeError(f"{_where} has type {type(obj).__name__}, which cannot be written as JSON")
+            item = float(item)
+        return to_jsonable(item, _where)
     if isinstance(obj, np.ndarray):
+        if obj.dtype == np.longdouble:
+            obj = obj.astype(np.float64)
         return to_jsonable(obj.tolist(), _where)
     if isinstance(obj, Mapping):
         out = {_json_key(k, _where): to_jsonable(v, f"{_where}[{k!r}]") for k, v in obj.items()}

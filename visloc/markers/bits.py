@@ -470,6 +470,10 @@ def read_bits(
     cells = sample.cells
     k, n, _ = cells.shape
     _check_border(border, n)
+    if k == 0:  # no candidates: no reads (reshape(0, -1) cannot size an empty batch)
+        s = n - 2 * border
+        empty = np.zeros(0)
+        return BitRead(np.zeros(0, bool), np.zeros((0, s, s), np.uint8), empty, empty.copy(), empty.copy())
     values = np.concatenate([cells.reshape(k, -1), sample.ring], axis=1)
     thr, dark, bright = otsu_threshold(values)
     contrast = bright - dark

@@ -45,6 +45,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from visloc._checks import marker_id
 from visloc.markers.binarize import blur, default_window, threshold, to_gray
 from visloc.markers.bits import (
     CellSample,
@@ -462,23 +463,26 @@ class MarkerDetector:
 
         Raises
         ------
+        TypeError
+            An id that is a bool or not a number.
         ValueError
-            ``quads`` not (K, 4, 2) finite corners with K ``ids``; an image that is not
-            uint8 grey or BGR.
+            ``quads`` not (K, 4, 2) finite corners with K ``ids``; an id with a fraction; an
+            image that is not uint8 grey or BGR (also with no quads).
         """
         q = np.asarray(quads, dtype=np.float64)
         want = np.asarray(ids).reshape(-1)
         if q.ndim != 3 or q.shape[1:] != (4, 2) or len(want) != len(q):
             raise ValueError(f"quads, ids: expected (K, 4, 2) corners and K ids, got shapes {q.shape} and {want.shape}")
+        gray = to_gray(image)  # checked even without quads
         if not len(q):
             return []
         if not np.isfinite(q).all():
             raise ValueError("quads: corners must be finite")
-        gray = to_gray(image)
+        expected = [marker_id(k, "ids") for k in want.tolist()]  # 3.7 is no marker (int() made it 3)
         gray = cv2.bitwise_not(gray) if inverted else gray
         made = self._made(gray, q, bool(inverted), retry_fit=False)[2]
-        return [d if d is not None and d.id == int(k) and d.rotation == 0 and d.refined else None
-                for d, k in zip(made, want.tolist(), strict=True)]
+        return [d if d is not None and d.id == k and d.rotation == 0 and d.refined else None
+                for d, k in zip(made, expected, strict=True)]
 
     def trace(self, image: NDArray[np.uint8]) -> DetectionTrace:
         """Run :meth:`detect` keeping every stage's intermediate result.

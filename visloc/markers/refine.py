@@ -79,6 +79,15 @@ def _profile_grid(count: int, end_gap: float, radius: int) -> tuple[NDArray[np.f
     return samples, centres
 
 
+def _check_edge_inputs(gray: NDArray, q: NDArray) -> None:
+    """Raise unless ``gray`` is a non-empty (H, W) image and every corner of ``q`` is finite
+    (OpenCV's remap of an empty image, or an empty crop of it, reads memory it does not own)."""
+    if not isinstance(gray, np.ndarray) or gray.ndim != 2 or not gray.size:
+        raise ValueError(f"gray must be a non-empty (H, W) image, got shape {getattr(gray, 'shape', None)}")
+    if not np.isfinite(q).all():
+        raise ValueError("quads: every corner must be finite")
+
+
 def sample_edge_profiles(
     gray: NDArray, quads: NDArray, radius: int, *, count: int = 24, end_gap: float = 0.15
 ) -> tuple[NDArray, NDArray, NDArray]:
@@ -107,8 +116,14 @@ def sample_edge_profiles(
     profiles : ndarray (K, 4, M, 2 * radius + 1) float32
         Bilinearly interpolated values of ``gray`` (the image's edge pixels repeated beyond
         it), inside (dark) first.
+
+    Raises
+    ------
+    ValueError
+        If ``gray`` is not a non-empty (H, W) image or a corner is not finite.
     """
     q = np.asarray(quads, np.float64).reshape(-1, 4, 2)
+    _check_edge_inputs(gray, q)
     k = len(q)
     d = q[:, _NEXT] - q
     u = d / np.maximum(np.hypot(d[..., 0], d[..., 1]), 1e-9)[..., None]
@@ -414,14 +429,24 @@ def edge_points(
         Each point's offset from the straight side along its normal, px.
     good : ndarray (K, 4, M) bool
         The profiles that crossed a clean step.
+
+    Raises
+    ------
+    ValueError
+        If ``gray`` is not a non-empty (H, W) image, a corner is not finite, or no quad
+        reaches the image.
     """
     q = np.asarray(quads, np.float64).reshape(-1, 4, 2)
+    _check_edge_inputs(gray, q)
     r = np.broadcast_to(np.asarray(radius, np.int64), (len(q),))
     big = int(r.max())
-    # only the part of the image around the quads, in linear light
+    # only the part of the image around the quads, in linear light (clipped as floats: no
+    # integer overflow for corners far off)
     h, w_img = gray.shape
-    x0, y0 = (np.floor(q.reshape(-1, 2).min(axis=0)) - big - 2).astype(int).clip(0)
-    x1, y1 = np.minimum((np.ceil(q.reshape(-1, 2).max(axis=0)) + big + 3).astype(int), [w_img, h])
+    x0, y0 = np.clip(np.floor(q.reshape(-1, 2).min(axis=0)) - big - 2, 0, [w_img, h]).astype(int)
+    x1, y1 = np.clip(np.ceil(q.reshape(-1, 2).max(axis=0)) + big + 3, 0, [w_img, h]).astype(int)
+    if x1 <= x0 or y1 <= y0:
+        raise ValueError(f"quads: none reaches the {w_img} x {h} image")
     light = _to_light(gray[y0:y1, x0:x1], response)
     base, normals, prof = sample_edge_profiles(light, q - [x0, y0], big, count=count, end_gap=end_gap)
     e, good, _, _ = _step_offsets(prof, r, big, np.ones(len(prof), bool), levels == "side")  # offsets, px
@@ -476,12 +501,18 @@ def bend_corners(
     Raises
     ------
     ValueError
-        If ``response`` is not a valid response (:func:`~visloc.markers.response.response_lut`).
+        If ``response`` is not a valid response (:func:`~visloc.markers.response.response_lut`),
+        ``gray`` is not a non-empty (H, W) image or a corner is not finite.
     """
     q = np.asarray(quads, np.float64).reshape(-1, 4, 2)
     k = len(q)
     if k == 0:
         return q.copy()
+    _check_edge_inputs(gray, q)
+    h, w_img = gray.shape
+    if not ((q[..., 0].max(axis=1) > -1.0) & (q[..., 0].min(axis=1) < w_img)
+            & (q[..., 1].max(axis=1) > -1.0) & (q[..., 1].min(axis=1) < h)).any():
+        return q.copy()  # no quad reaches the image: nothing to bend
     _, normals, e, good = edge_points(gray, q, radius=radius, count=count, end_gap=end_gap, response=response,
                                       levels=levels)
     r = np.broadcast_to(np.asarray(radius, np.int64), (k,))

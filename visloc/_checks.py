@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 import numbers
 
-__all__ = ["all_finite", "check_real", "marker_id"]
+__all__ = ["all_finite", "check_int", "check_real", "marker_id"]
 
 
 def check_real(value: object, name: str, *, positive: bool = False, nonneg: bool = False,
@@ -64,6 +64,43 @@ def all_finite(arr: object) -> bool:
     import numpy as np  # (this module itself loads no numpy)
 
     return bool(np.isfinite(arr).all())
+
+
+def check_int(value: object, name: str, *, low: int | None = None, high: int | None = None) -> int:
+    """``value`` as an int in ``[low, high]`` (``None``: unbounded), or raise naming ``name``.
+
+    Parameters
+    ----------
+    value : object
+        An integer (Python's or numpy's; not a bool).
+    name : str
+        The argument's name, for the messages.
+    low, high : int or None
+        Inclusive bounds.
+
+    Returns
+    -------
+    int
+        ``value`` as a Python int.
+
+    Raises
+    ------
+    TypeError
+        ``value`` is a bool or not an integer.
+    ValueError
+        ``value`` is outside ``[low, high]``.
+    """
+    if type(value) is not int:  # the common case skips the ABC checks
+        if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+            raise TypeError(f"{name} must be an integer, got {type(value).__name__}")
+        value = int(value)
+    if (low is not None and value < low) or (high is not None and value > high):
+        if high is None:
+            raise ValueError(f"{name} must be >= {low}, got {value}")
+        if low is None:
+            raise ValueError(f"{name} must be <= {high}, got {value}")
+        raise ValueError(f"{name} must be in [{low}, {high}], got {value}")
+    return value
 
 
 def marker_id(value: object, where: str) -> int:

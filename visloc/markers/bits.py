@@ -29,8 +29,9 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from visloc._checks import check_int
 from visloc._compiled import use_compiled
-from visloc.markers.dictionary import Dictionary, _check_binary, _check_int
+from visloc.markers.dictionary import Dictionary, _check_binary
 
 try:
     from visloc.markers import _cells
@@ -170,8 +171,8 @@ def _checked_quads(gray: NDArray[np.uint8], quads: NDArray, n: int, per_side: in
     if gray.ndim != 2 or not gray.size:
         raise ValueError(f"gray must be a non-empty (H, W) image, got shape {gray.shape}")
     if type(n) is not int or type(per_side) is not int or n < 1 or per_side < 1:  # else plainly valid
-        _check_int(n, "n", 1)
-        _check_int(per_side, "per_side", 1)
+        check_int(n, "n", low=1)
+        check_int(per_side, "per_side", low=1)
     q = np.asarray(quads, np.float64)
     if q.shape[-2:] != (4, 2) or q.ndim not in (2, 3):
         raise ValueError(f"quads must be (K, 4, 2) or (4, 2), got shape {q.shape}")
@@ -182,7 +183,7 @@ def _checked_quads(gray: NDArray[np.uint8], quads: NDArray, n: int, per_side: in
 
 def _check_border(border: int, n: int) -> None:
     """Raise unless a black border of ``border`` cells leaves bits inside ``n`` cells a side."""
-    _check_int(border, "border", 1)
+    check_int(border, "border", low=1)
     if n <= 2 * border:
         raise ValueError(f"n must be more than 2 border ({2 * border}), got {n}")
 

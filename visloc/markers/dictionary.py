@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from visloc._checks import check_int
 from visloc._storage import open_storage
 
 #: OpenCV predefined dictionary names visloc accepts (case-insensitive for the family tag).
@@ -92,9 +93,9 @@ class Dictionary:
             If ``marker_id`` is not in ``[0, len(self) - 1]``, ``cell_px`` < 1 or
             ``border_bits`` < 0.
         """
-        _check_int(marker_id, "marker_id", 0, len(self) - 1)
-        _check_int(cell_px, "cell_px", 1)
-        _check_int(border_bits, "border_bits", 0)
+        check_int(marker_id, "marker_id", low=0, high=len(self) - 1)
+        check_int(cell_px, "cell_px", low=1)
+        check_int(border_bits, "border_bits", low=0)
         grid = np.pad(self.bits[marker_id], border_bits).astype(np.uint8) * 255
         return np.kron(grid, np.ones((cell_px, cell_px), np.uint8))
 
@@ -174,17 +175,6 @@ def _check_binary(b: NDArray, name: str) -> None:
         return
     bad = b[(b != 0) & (b != 1)].flat[0]
     raise ValueError(f"{name} must hold only 0 and 1, got {bad}")
-
-
-def _check_int(value: object, name: str, least: int, most: int | None = None) -> None:
-    """Raise a TypeError naming ``name`` unless ``value`` is an integer (Python's or numpy's,
-    not a bool), a ValueError unless it is in ``[least, most]`` (``most`` None: no bound)."""
-    if type(value) is not int and (isinstance(value, bool) or not isinstance(value, (int, np.integer))):
-        raise TypeError(f"{name} must be an integer, got {type(value).__name__}")
-    if most is not None and not least <= value <= most:  # type: ignore[operator]
-        raise ValueError(f"{name} must be in [{least}, {most}], got {value}")
-    if value < least:  # type: ignore[operator]
-        raise ValueError(f"{name} must be >= {least}, got {value}")
 
 
 def _build(name: str, bits: NDArray[np.uint8], max_correction: int | None, *, check: bool = False) -> Dictionary:

@@ -14,10 +14,10 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from visloc._checks import check_int
 from visloc.control._checks import check_real
 from visloc.estimation.height import ultrasound_reading
 from visloc.pose.maps import MarkerMap
-from visloc.synth._checks import check_int
 from visloc.synth.flight import default_bottom_camera
 from visloc.synth.floor import FloorTexture
 from visloc.types import FloatArray, Pose

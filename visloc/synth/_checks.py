@@ -116,38 +116,3 @@ def check_number(
     if high is not None and (v > high or (high_open and v == high)):
         raise ValueError(f"{name} must be {'<' if high_open else '<='} {high}, got {v}")
     return v
-
-
-def check_int(value: object, name: str, *, low: int | None = None, high: int | None = None) -> int:
-    """Return ``value`` as an int in ``[low, high]`` or raise naming ``name``.
-
-    Parameters
-    ----------
-    value : int
-        The integer to check (not a bool).
-    name : str
-        Name of the argument in error messages.
-    low, high : int or None
-        Inclusive bounds (``None``: unbounded).
-
-    Returns
-    -------
-    int
-
-    Raises
-    ------
-    TypeError
-        If ``value`` is not an integer.
-    ValueError
-        If it is out of ``[low, high]``.
-    """
-    if not isinstance(value, numbers.Integral) or isinstance(value, bool):
-        raise TypeError(f"{name} must be an int, got {type(value).__name__}")
-    v = int(value)
-    if (low is not None and v < low) or (high is not None and v > high):
-        if high is None:
-            raise ValueError(f"{name} must be >= {low}, got {v}")
-        if low is None:
-            raise ValueError(f"{name} must be <= {high}, got {v}")
-        raise ValueError(f"{name} must be in [{low}, {high}], got {v}")
-    return v

@@ -27,8 +27,9 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from visloc._checks import check_int
 from visloc.markers.response import srgb_to_linear
-from visloc.synth._checks import check_camera, check_int, check_number, check_size
+from visloc.synth._checks import check_camera, check_number, check_size
 from visloc.synth.textures import motion_kernel
 
 FloatArray = NDArray[np.float64]

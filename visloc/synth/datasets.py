@@ -18,8 +18,9 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from visloc._checks import check_int
 from visloc.markers.dictionary import Dictionary, load_dictionary
-from visloc.synth._checks import check_int, check_number, check_size
+from visloc.synth._checks import check_number, check_size
 from visloc.synth.markers import MarkerRender, render_markers
 from visloc.synth.scenes import DIFFICULTIES, MARKER_LENGTH, default_camera, random_scene
 from visloc.synth.textures import make_background

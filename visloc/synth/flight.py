@@ -36,7 +36,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
-from visloc.synth._checks import check_camera, check_int, check_number, check_size
+from visloc._checks import check_int
+from visloc.synth._checks import check_camera, check_number, check_size
 from visloc.synth.datasets import write_camera_yml
 from visloc.synth.textures import _photo_texture, degrade, smooth_noise
 

@@ -21,9 +21,10 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from visloc._checks import check_int
 from visloc.markers.dictionary import Dictionary, load_dictionary
 from visloc.pose.maps import MarkerMap
-from visloc.synth._checks import check_camera, check_int, check_number, check_size
+from visloc.synth._checks import check_camera, check_number, check_size
 from visloc.synth.flight import _mipmap, _render, _texture_level
 from visloc.synth.textures import degrade
 from visloc.types import FloatArray, Pose

@@ -30,8 +30,9 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from visloc._checks import check_int
 from visloc.markers.dictionary import Dictionary, load_dictionary
-from visloc.synth._checks import check_camera, check_int, check_number, check_size
+from visloc.synth._checks import check_camera, check_number, check_size
 from visloc.synth.camera import (
     CameraEffects,
     apply_camera,

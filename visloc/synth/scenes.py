@@ -8,8 +8,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
+from visloc._checks import check_int
 from visloc.markers.dictionary import Dictionary, load_dictionary
-from visloc.synth._checks import check_int, check_number, check_size
+from visloc.synth._checks import check_number, check_size
 from visloc.synth.camera import CameraEffects
 from visloc.synth.markers import MarkerRender, render_markers
 from visloc.synth.textures import TEXTURES

@@ -23,6 +23,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import matrix_balance
 
 from visloc.control._checks import check_params, check_real, resolve_arm
 from visloc.control.design import ControllerGains, augmented_model, design_gains
@@ -227,16 +228,20 @@ def common_lyapunov(matrices: FloatArray, *, solver: str | None = None) -> Lyapu
 
     The strict inequalities are posed as ``P >= I`` and ``A_i^T P + P A_i <= -I`` (the same
     problem up to scaling ``P``); a solution is accepted only after numpy confirms both with
-    eigenvalues.
+    eigenvalues. The LMI is solved on the vertices balanced by one diagonal similarity
+    ``D^-1 A_i D`` (:func:`scipy.linalg.matrix_balance` of their mean): a strict certificate
+    ``P'`` there is ``P = D^-1 P' D^-1`` here, and the first-order solver needs about a third
+    of the iterations on the better-scaled entries.
 
     Parameters
     ----------
     matrices : array_like (N, n, n)
         The polytope's vertices (e.g. :func:`closed_loop_vertices`), N >= 1.
     solver : str, optional
-        cvxpy solver name. By default SCS (first order: 2-7 s for the 256 vertices of the
-        16-state loop here) with at most 1000 iterations, then Clarabel (interior point,
-        about 10 s) when SCS stops without a conclusion (near the feasibility boundary).
+        cvxpy solver name. By default SCS (first order: 1.5-2 s of solving, plus about as
+        long for cvxpy to compile, for the 256 vertices of the 16-state loop here) with at
+        most 1000 iterations, then Clarabel (interior point, about 10 s) when SCS stops
+        without a conclusion (near the feasibility boundary).
 
     Returns
     -------
@@ -256,10 +261,12 @@ def common_lyapunov(matrices: FloatArray, *, solver: str | None = None) -> Lyapu
         return LyapunovResult("unavailable", None, math.nan,
                               "cvxpy is not installed (pip install visloc[lmi])")
     size = m.shape[1]
+    scale = matrix_balance(m.mean(axis=0), permute=False, separate=True)[1][0]  # D = diag(scale)
+    balanced = m * (scale[None, None, :] / scale[None, :, None])  # D^-1 A_i D
     p_var = cp.Variable((size, size), symmetric=True)
     eye = np.eye(size)
     constraints = [p_var >> eye]
-    for a in m:
+    for a in balanced:
         lhs = a.T @ p_var
         constraints.append(lhs + lhs.T << -eye)  # A_i^T P + P A_i <= -I
     problem = cp.Problem(cp.Minimize(0), constraints)  # a feasibility problem
@@ -282,7 +289,7 @@ def common_lyapunov(matrices: FloatArray, *, solver: str | None = None) -> Lyapu
     message = "; ".join(notes)
     if p_var.value is None or problem.status not in ("optimal", "optimal_inaccurate"):
         return LyapunovResult("infeasible", None, math.nan, message)
-    p_val = 0.5 * (p_var.value + p_var.value.T)
+    p_val = 0.5 * (p_var.value + p_var.value.T) / np.outer(scale, scale)  # D^-1 P' D^-1
     worst = max(float(np.max(np.linalg.eigvalsh(a.T @ p_val + p_val @ a))) for a in m)
     if np.min(np.linalg.eigvalsh(p_val)) <= 0.0 or worst >= 0.0:
         return LyapunovResult("infeasible", None, worst,

@@ -147,3 +147,16 @@ def test_saddle_fit_finds_a_sharp_x_corner():
     assert ok[0] and np.abs(p[0] - c).max() < 0.1  # a quadratic is not the corner's shape: 0.07 px here
     ramp = np.add.outer(np.zeros(41), np.arange(41.0)) ** 2  # a valley along y: no saddle
     assert not refine_saddles(ramp, [[20.0, 20.0]], radius=5)[1][0]
+
+
+@pytest.mark.parametrize("line, key", [("first_id: 2.7", "first_id"), ('first_id: "two"', "first_id"),
+                                       ("legacy: 2", "legacy"), ("legacy: 0.5", "legacy")])
+def test_a_board_file_with_a_fractional_or_text_id_or_flag_is_refused(tmp_path, line, key):
+    # first_id 2.7 used to be read as 2 (a board two markers off), legacy 0.5 as True
+    path = tmp_path / "b.yml"
+    path.write_text("%YAML:1.0\n---\nboard_type: charuco\nsquares_x: 5\nsquares_y: 5\nsquare_length: 0.04\n"
+                    f"marker_length: 0.03\ndictionary: DICT_4X4_50\n{line}\n")
+    with pytest.raises(ValueError, match=key):
+        CharucoBoard.from_file(path)
+    path.write_text(path.read_text().replace(line, f"{key}: 1"))
+    assert getattr(CharucoBoard.from_file(path), key) == 1

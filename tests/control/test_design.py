@@ -146,3 +146,21 @@ def test_gains_to_dict_is_json_ready_with_numpy_specs():
     g = design_gains(ARDRONE2, ControlSpecs(height=LoopSpec(np.float32(3.0), 60.0, 0.1)))
     d = json.loads(json.dumps(g.to_dict()))  # a float32 gain used to stop json
     assert d["height"]["ki"] == pytest.approx(float(g.loop("height").ki))
+
+
+@pytest.mark.parametrize("crossover", [1e-300, 1e150, 1e300])
+def test_design_loop_refuses_a_crossover_out_of_float_range_naming_it(crossover):
+    # a LinAlgError from np.roots ("Array must not contain infs or NaNs") before
+    num, den = plant("roll", ARDRONE2)
+    with pytest.raises(ValueError, match="out of floating-point range"):
+        design_loop(num, den, LoopSpec(crossover, 45.0, 0.1))
+
+
+@pytest.mark.parametrize("num, den, exc, word", [
+    ([0.0], [1.0, 0.0, 0.0], ValueError, "num"), ([np.nan], [1.0, 0.0, 0.0], ValueError, "num"),
+    ([], [1.0, 0.0, 0.0], ValueError, "num"), ("ab", [1.0, 0.0, 0.0], TypeError, "num"),
+    ([1.0], [0.0, 1.0, 0.0], ValueError, "den"), ([1.0], [[1.0, 0.0]], ValueError, "den"),
+])
+def test_design_loop_refuses_a_plant_that_is_not_two_finite_polynomials(num, den, exc, word):
+    with pytest.raises(exc, match=word):
+        design_loop(num, den, LoopSpec(5.0, 45.0))

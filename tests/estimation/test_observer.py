@@ -119,3 +119,24 @@ def test_observer_refuses_non_positive_dt(dt):
         obs.update((0.0, 0.0), dt)
     with pytest.raises(ValueError, match="z"):
         obs.update((0.0, 0.0, 0.0))
+
+
+@pytest.mark.parametrize("poles", [(-3.0, -3.0), (-2 + 1j, -2 - 1j), (-5.0, -0.5)])
+@pytest.mark.parametrize("dt", [1e-300, 1e-9, 1e-3, 1 / 30, 2.0, 1e300])
+def test_observer_gains_place_the_poles_at_any_step(poles, dt):
+    # the streaming observer's current-form gains put eig(F - L C F) at exp(p dt); Ackermann's
+    # formula lost them (and raised "not observable") below dt ~ 1e-150 and above 1e150
+    obs = LuenbergerObserver(poles, 0.01)
+    l1, l2 = obs.gains(dt)
+    p = np.asarray(poles, complex)
+    assert l1 == pytest.approx(-math.expm1(p.sum().real * dt), rel=1e-12)
+    assert l2 == pytest.approx((np.expm1(p[0] * dt) * np.expm1(p[1] * dt)).real / dt, rel=1e-12)
+    if 1e-6 < dt < 1e6:  # where the matrix and its eigenvalues are representable
+        f = np.array([[1.0, dt], [0.0, 1.0]])
+        closed = f - np.outer([l1, l2], np.array([1.0, 0.0]) @ f)
+        got = np.sort_complex(np.linalg.eigvals(closed))
+        np.testing.assert_allclose(got, np.sort_complex(np.exp(p * dt)), atol=1e-6)
+        np.testing.assert_allclose([l1, l2], luenberger_gains(np.exp(p * dt), discrete_dt=dt, form="current"),
+                                   rtol=1e-6)
+    pos, vel = LuenbergerObserver(poles, dt, initial_position=(0.0, 0.0)).update((1.0, 1.0))
+    assert np.all(np.isfinite(pos)) and np.all(np.isfinite(vel)) and np.all(pos > 0)

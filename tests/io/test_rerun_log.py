@@ -6,6 +6,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from types import SimpleNamespace
 
+import cv2
 import numpy as np
 import pytest
 import rerun as rr
@@ -158,3 +159,38 @@ def test_flow_and_localize_frames_are_checked_as_log_frame_checks_them(tmp_path:
         log.log_localize(1, 0.1, None, (0.0, 0.0, 1.0))
     with pytest.raises(ValueError, match="closed"):
         log.log_flow(1, 0.1, None, None, None)
+
+
+@pytest.mark.parametrize("bad, exc", [((1.0, 2.0), ValueError), ((1.0, 2.0, 3.0, 4.0), ValueError),
+                                      ((0.0, float("nan"), 1.0), ValueError), ("abc", TypeError)])
+def test_a_localize_position_that_is_not_three_finite_numbers_logs_nothing(tmp_path: Path, bad, exc) -> None:
+    # a 2-element estimate used to be logged as x and y alone and a 2-point track segment
+    path = tmp_path / "loc.rrd"
+    with RerunLogger(path) as log:
+        log.log_localize(0, 0.0, None, (0.0, 0.0, 1.0), truth=(0.0, 0.0, 1.0))
+        with pytest.raises(exc, match="estimate"):
+            log.log_localize(1, 0.1, None, bad)
+        with pytest.raises(exc, match="truth"):
+            log.log_localize(1, 0.1, None, (0.0, 0.0, 1.0), truth=bad)
+        log.log_localize(2, 0.2, None, (0.1, 0.0, 1.0))
+    rows = _rows(path)
+    frames = {f for (entity, _), values in rows.items() if entity.startswith("/plots") for f, _ in values}
+    assert frames == {0, 2}  # nothing of frame 1
+    track = dict(rows[("/world/estimate", "LineStrips3D:strips")])[2][0]
+    assert len(track) == 2 and all(len(p) == 3 for p in track)
+
+
+def test_a_recording_not_named_rrd_is_refused_before_anything_is_written(tmp_path: Path) -> None:
+    # it used to be written as x.txt, which the viewer would not open as a recording
+    with pytest.raises(ValueError, match=r"\.rrd"):
+        RerunLogger(tmp_path / "sub" / "x.txt")
+    assert list(tmp_path.iterdir()) == []
+    from visloc.cli import main
+
+    image = tmp_path / "a.png"
+    assert cv2.imwrite(str(image), np.full((64, 64), 200, np.uint8))
+    assert main(["detect", str(image), "--rerun", str(tmp_path / "x.txt")]) == 2
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.png"]
+    with RerunLogger(tmp_path / "y.RRD") as log:  # the suffix in any case
+        log.log_localize(0, 0.0, None, (0.0, 0.0, 1.0))
+    assert (tmp_path / "y.RRD").is_file()

@@ -86,3 +86,23 @@ def test_stage_defaults_are_the_detectors():
     assert inspect.signature(blur).parameters["sigma"].default == params.blur_sigma
     assert inspect.signature(threshold).parameters["window"].default == params.passes[0].window
     assert inspect.signature(threshold).parameters["offset"].default == params.offset
+
+
+@pytest.mark.parametrize("native", [True, False])
+@pytest.mark.parametrize("bad, exc, match", [
+    (np.full((8, 8), 300, np.uint16), ValueError, "uint8"),  # compiled: wrapped to 44 before
+    (np.full((8, 8), -1.0), ValueError, "uint8"),
+    (np.zeros((8, 8, 3), np.uint8), ValueError, r"\(H, W\)"),
+    (np.zeros((0, 8), np.uint8), ValueError, "non-empty"),
+    ([[0, 255], [255, 0]], TypeError, "numpy array"),
+])
+def test_threshold_rejects_what_is_not_a_grey_uint8_image_either_way(native, bad, exc, match):
+    with pytest.raises(exc, match=match):
+        threshold(bad, native=native)
+
+
+@pytest.mark.parametrize("kw, match", [({"window": 9.0}, "window"), ({"window": True}, "window"),
+                                       ({"offset": float("nan")}, "offset")])
+def test_threshold_rejects_a_fractional_window_or_a_nan_offset(kw, match):
+    with pytest.raises(ValueError, match=match):
+        threshold(np.zeros((8, 8), np.uint8), **kw)

@@ -231,6 +231,34 @@ def test_constructor_errors():
         MarkerDetector("DICT_4X4_50", small_side=float("nan"))
 
 
+@pytest.mark.parametrize("key, bad", [
+    ("dark_mean", -1.0), ("dark_mean", float("nan")), ("min_pass_size", -1), ("min_pass_size", 2.5),
+    ("erode", 1.5), ("board_retry", "yes"), ("base_height", 0), ("blur_sigma", -0.5), ("blur_sigma", "x"),
+    ("offset", float("inf")), ("corner_sigma", 0.0), ("corner_sigma", "x"), ("corner_padding", 0.5),
+    ("refine", None), ("refine_radius", 0), ("refine_radius", 2.5), ("refine_iterations", 0),
+    ("refine_iterations", 7), ("refine_max_radius", 0), ("refine_profiles", 1), ("refine_profiles", True),
+    ("bend", 1), ("border_error_rate", 1.5), ("min_quiet_zone", -0.1), ("cell_margin", 0.5),
+    ("bit_threshold", 2.0), ("error_correction_rate", float("nan")), ("error_correction_rate", True),
+])
+def test_every_parameter_is_checked_when_the_detector_is_made(key, bad):
+    # before, these were taken and failed (or ran on nonsense) only at the first frame
+    switch = key in ("board_retry", "refine", "bend")
+    with pytest.raises(TypeError if switch else ValueError, match=key):
+        MarkerDetector("DICT_4X4_50", **{key: bad})
+
+
+def test_parameters_at_their_bounds_are_taken():
+    det = MarkerDetector("DICT_4X4_50", dark_mean=0, min_pass_size=0, erode=5, blur_sigma=0.0, offset=-3,
+                         corner_sigma=2.0, corner_padding=0.0, refine_radius=3, refine_iterations=6,
+                         refine_profiles=2, border_error_rate=1.0, min_quiet_zone=0.0, cell_margin=0.0,
+                         bit_threshold=0.0, error_correction_rate=0.0, refine=np.True_)
+    assert det.params.refine_iterations == 6 and det.params.bit_threshold == 0.0
+    with pytest.raises(TypeError, match="candidates"):
+        MarkerDetector("DICT_4X4_50", candidates={"min_side": 3})
+    with pytest.raises(ValueError, match="scale"):
+        MarkerDetector("DICT_4X4_50", passes=[(float("inf"), 9)])
+
+
 def _sheet(ids, border_bits=1, cell=12, invert=False):
     """Markers drawn by OpenCV side by side on white, 2 cells apart, a 3-cell margin, blurred in
     linear light and sRGB-encoded as a camera writes them; returns the image and each marker's

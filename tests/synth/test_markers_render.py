@@ -9,17 +9,22 @@ import numpy as np
 import pytest
 from scipy.spatial import ConvexHull
 
+from visloc.boards import CharucoBoard
 from visloc.markers.dictionary import load_dictionary
 from visloc.synth import (
     TEXTURES,
     default_camera,
+    imu_stream,
     marker_object_points,
     polygon_coverage,
+    random_board_scene,
     random_scene,
     render_dataset,
     render_markers,
     render_video,
+    write_camera_yml,
 )
+from visloc.synth.calibration import calibration_views
 from visloc.types import Pose
 
 FACING = np.diag([1.0, -1.0, -1.0])  # marker x right, y up (image up), z towards the camera
@@ -322,3 +327,48 @@ def test_an_interrupted_dataset_keeps_ground_truth_for_its_frames(tmp_path):
     gt = json.loads((tmp_path / "ds" / "ground_truth.json").read_text())
     assert [f["file"] for f in gt["frames"]] == [f"frame_{i:04d}.png" for i in range(3)]
     assert (tmp_path / "ds" / "camera.yml").is_file()
+
+
+@pytest.mark.parametrize("pose, word", [
+    (Pose(FACING, np.array([0.0, 0.0, np.nan])), "finite"),
+    (Pose(np.full((3, 3), np.inf), np.array([0.0, 0.0, 1.0])), "finite"),
+    (Pose(2.0 * FACING, np.array([0.0, 0.0, 1.0])), "rotation"),
+    (Pose(np.diag([1.0, 1.0, -1.0]), np.array([0.0, 0.0, 1.0])), "rotation"),  # a mirror
+])
+def test_a_placement_pose_that_is_not_a_finite_rotation_is_refused(pose, word):
+    # a NaN pose used to render nothing, with NaN corners as the marker's truth
+    with pytest.raises(ValueError, match=f"placements\\[0\\] pose.*{word}"):
+        render_markers(K640, (640, 480), [(3, pose, 0.2)], "DICT_4X4_50")
+
+
+@pytest.mark.parametrize("call, exc, word", [
+    (lambda: random_scene(-1), ValueError, "rng.*>= 0"),
+    (lambda: random_scene(True), TypeError, "rng"),
+    (lambda: random_board_scene(-3), ValueError, "rng.*>= 0"),
+    (lambda: render_markers(K640, (640, 480), [], "DICT_4X4_50", rng=-1), ValueError, "rng.*>= 0"),
+    (lambda: render_markers(K640, (640, 480), [], "DICT_4X4_50", rng=2.5), TypeError, "rng"),
+    (lambda: imu_stream(1.0, 100.0, seed=-1), ValueError, "seed"),
+    (lambda: calibration_views(CharucoBoard(5, 5, 0.04, 0.03, "DICT_4X4_50"), 1, seed=-1), ValueError, "seed"),
+])
+def test_negative_or_fractional_seeds_are_refused_naming_the_argument(call, exc, word):
+    # numpy's "expected non-negative integer" did not say which argument
+    with pytest.raises(exc, match=word):
+        call()
+
+
+def test_write_camera_yml_round_trips_and_refuses_what_it_cannot_write(tmp_path):
+    from visloc.pose import Camera
+
+    dist = np.array([-0.1, 0.02, 0.0, 0.0, 0.001])
+    cam = Camera.from_file(write_camera_yml(tmp_path / "cam.yml", K640, (640, 480), dist))
+    np.testing.assert_array_equal(cam.K, K640)
+    np.testing.assert_array_equal(np.ravel(cam.dist), dist)
+    assert cam.size == (640, 480)
+    for args, exc, word in [((tmp_path / "no" / "cam.yml", K640, (640, 480)), ValueError, "folder"),  # was cv2.error
+                            ((tmp_path / "c.yml", np.eye(2), (640, 480)), ValueError, "K"),
+                            ((tmp_path / "c.yml", K640, (640, 0)), ValueError, "size"),
+                            ((tmp_path / "c.yml", K640, (640, 480), [0.1, np.nan, 0, 0]), ValueError, "dist"),
+                            ((tmp_path / "c.yml", K640, (640, 480), [0.1]), ValueError, "dist")]:
+        with pytest.raises(exc, match=word):
+            write_camera_yml(*args)
+    assert not (tmp_path / "c.yml").exists()

@@ -246,11 +246,12 @@ class CharucoBoard:
             key = "dictionary"
             dictionary = fs.getNode("dictionary").string() or "DICT_6X6_250"
             key = "first_id"
-            first = fs.getNode("first_id")
-            first = 0 if first.empty() else int(first.real())
+            first = _whole_node(fs.getNode("first_id"), path, key, 0)
             key = "legacy"
-            legacy = fs.getNode("legacy")
-            legacy = False if legacy.empty() else bool(legacy.real())
+            legacy = _whole_node(fs.getNode("legacy"), path, key, 0)
+            if legacy not in (0, 1):
+                raise ValueError(f"board file {path}: legacy must be 0 or 1, got {legacy}")
+            legacy = bool(legacy)
         except cv2.error:  # OpenCV asserts on some missing nodes
             raise ValueError(f"board file {path}: {key} is missing or malformed") from None
         finally:
@@ -259,6 +260,18 @@ class CharucoBoard:
         if not (math.isfinite(sx) and math.isfinite(sy)) or sx != int(sx) or sy != int(sy):
             raise ValueError(f"board file {path}: squares_x and squares_y must be integers, got {sx}, {sy}")
         return cls(int(sx), int(sy), values["square_length"], values["marker_length"], dictionary, first, legacy)
+
+
+def _whole_node(node: cv2.FileNode, path: Path, key: str, default: int) -> int:
+    """A board file's integer ``key`` (``default`` when it is absent): a ValueError naming it
+    when it holds text or a fraction (``first_id: 2.7`` was read as 2 before)."""
+    if node.empty():
+        return default
+    value = node.real() if node.isReal() or node.isInt() else math.nan
+    if not math.isfinite(value) or value != int(value):
+        shown = node.string() if node.isString() else value
+        raise ValueError(f"board file {path}: {key} must be an integer, got {shown!r}")
+    return int(value)
 
 
 @dataclass(frozen=True, eq=False)

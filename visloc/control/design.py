@@ -24,6 +24,7 @@ them exactly at the crossover.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -314,19 +315,27 @@ def design_loop(num: FloatArray, den: FloatArray, spec: LoopSpec) -> LoopGains:
     Raises
     ------
     ValueError
-        If a PID cannot meet the spec (more than 90 degrees of lead needed) or the closed
-        loop it gives is unstable.
+        If a PID cannot meet the spec (more than 90 degrees of lead needed), the closed
+        loop it gives is unstable, the plant's response or the gains at the crossover are out
+        of floating-point range, or ``num``/``den`` are not finite polynomials (``den`` with a
+        non-zero leading coefficient, ``num`` not all zero).
     TypeError
-        ``spec`` is not a :class:`LoopSpec`.
+        ``spec`` is not a :class:`LoopSpec`; ``num`` or ``den`` not numbers.
     """
     if not isinstance(spec, LoopSpec):
         raise TypeError(f"spec: expected LoopSpec, got {type(spec).__name__}")
+    num, den = _polynomial(num, "num"), _polynomial(den, "den")
     w = spec.crossover
-    pw = np.polyval(num, 1j * w) / np.polyval(den, 1j * w)
-    c = np.exp(1j * np.deg2rad(spec.phase_margin - 180.0)) / pw
-    kp = float(c.real)
-    kd = float((c.imag + kp * spec.integral) / w)
-    ki = kp * spec.integral * w
+    with np.errstate(all="ignore"):  # a response out of float range is refused just below
+        pw = np.polyval(num, 1j * w) / np.polyval(den, 1j * w)
+        c = np.exp(1j * np.deg2rad(spec.phase_margin - 180.0)) / pw
+        kp = float(c.real)
+        kd = float((c.imag + kp * spec.integral) / w)
+        ki = kp * spec.integral * w
+    if not (math.isfinite(kp) and math.isfinite(kd) and math.isfinite(ki)) or (kp > 0.0 and kd > 0.0 and not (
+            np.all(np.isfinite(np.polymul(num, [kd, kp, ki]))))):
+        raise ValueError(f"spec: the plant's response at the crossover {w:g} rad/s is out of floating-point range "
+                         f"(gains kp = {kp:.4g}, kd = {kd:.4g}, ki = {ki:.4g}); choose a crossover nearer the plant's")
     if kp <= 0.0 or kd <= 0.0:
         raise ValueError(
             f"spec: {spec.phase_margin} deg at {w} rad/s needs more lead than a PD gives "
@@ -339,6 +348,19 @@ def design_loop(num: FloatArray, den: FloatArray, spec: LoopSpec) -> LoopGains:
     if np.max(np.roots(char).real) >= 0.0:
         raise ValueError(f"spec: the loop designed for {spec} is unstable in closed loop")
     return LoopGains(kp=kp, kd=kd, ki=ki)
+
+
+def _polynomial(coeffs: object, name: str) -> FloatArray:
+    """``coeffs`` as a 1-D finite float polynomial (highest power first), or a TypeError /
+    ValueError naming ``name``."""
+    try:
+        a = np.asarray(coeffs, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"{name}: expected polynomial coefficients, got {type(coeffs).__name__}") from exc
+    if a.ndim != 1 or not a.size or not np.all(np.isfinite(a)) or not np.any(a) or (name == "den" and a[0] == 0):
+        raise ValueError(f"{name}: expected finite coefficients, highest power first and not all zero"
+                         + (" (the first non-zero)" if name == "den" else "") + f", got {a.tolist()!r}")
+    return a
 
 
 def design_gains(params: ARDrone2Params, specs: ControlSpecs | None = None) -> ControllerGains:

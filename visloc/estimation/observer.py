@@ -210,8 +210,13 @@ class LuenbergerObserver:
         """
         dt = check_dt(dt)
         if self._gain_cache[0] != dt:
-            l1, l2 = luenberger_gains(np.exp(self.poles * dt), discrete_dt=dt, form="current")
-            self._gain_cache = (dt, float(l1), float(l2))
+            # report eq. (3.14), current form: F - L C F has determinant 1 - L_1 and trace
+            # 2 - L_1 - L_2 dt, so poles z_i = exp(p_i dt) need L_1 = 1 - z_1 z_2 and
+            # L_2 = (1 - z_1)(1 - z_2) / dt; in expm1 these hold for any step (Ackermann's
+            # formula, luenberger_gains, lost the pole placement below dt ~ 1e-150 and above 1e150)
+            m1, m2 = np.expm1(self.poles * dt).tolist()
+            per_second = complex(m1.real / dt, m1.imag / dt)  # (z_1 - 1) / dt, without underflow
+            self._gain_cache = (dt, -math.expm1((self.poles.sum() * dt).real), (per_second * m2).real)
         return self._gain_cache[1], self._gain_cache[2]
 
     def update(self, z: object, dt: float | None = None) -> tuple[FloatArray, FloatArray]:

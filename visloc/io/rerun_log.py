@@ -80,6 +80,12 @@ class RerunLogger(Closing):
         When given (1-100), images are stored JPEG-compressed, which makes long recordings
         10-20 times smaller; default: raw pixels.
 
+    Raises
+    ------
+    TypeError, ValueError
+        ``path`` not a path, a folder or not named ``.rrd`` (the viewer opens a recording by
+        its suffix); ``app_id`` empty; ``jpeg_quality`` outside 1-100. Nothing is created then.
+
     Examples
     --------
     >>> with RerunLogger("run.rrd") as log:  # doctest: +SKIP
@@ -108,6 +114,8 @@ class RerunLogger(Closing):
         self.path = Path(path)
         if self.path.is_dir():
             raise ValueError(f"path is a directory, expected an .rrd file path: {self.path}")
+        if self.path.suffix.lower() != ".rrd":  # the viewer opens a recording by its suffix
+            raise ValueError(f"path: a rerun recording is an .rrd file, got {self.path}")
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.jpeg_quality = jpeg_quality
         self.recording = _rerun().RecordingStream(app_id, recording_id=str(uuid.uuid4()))
@@ -314,13 +322,13 @@ class RerunLogger(Closing):
         ------
         TypeError, ValueError
             As for :meth:`log_flow`: a closed logger, a ``time`` that is not finite, an
-            ``index`` that is not an int or an unusable ``image``.
+            ``index`` that is not an int or an unusable ``image``; an ``estimate`` or
+            ``truth`` that is not three finite numbers (checked before anything is logged).
         """
+        points = {name: _position(p, name) for name, p in (("estimate", estimate), ("truth", truth)) if p is not None}
         rec = self._frame(index, time, image)
-        for name, p in (("estimate", estimate), ("truth", truth)):
-            if p is None:
-                continue
-            for axis, v in zip("xyz", p, strict=False):
+        for name, p in points.items():
+            for axis, v in zip("xyz", p, strict=True):
                 rec.log(f"plots/{axis}/{name}", _rerun().Scalars(float(v)))
             track = self._tracks3d.setdefault(name, [])
             track.append([float(v) for v in p])
@@ -399,3 +407,13 @@ class RerunLogger(Closing):
         self.recording.disconnect()
         commit_staged(staged_path(self.path), self.path, keep=True)
 
+
+def _position(p: object, name: str) -> list[float]:
+    """``p`` as three finite floats (a position, m), or a TypeError/ValueError naming ``name``."""
+    try:
+        a = np.asarray(p, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"{name}: expected three numbers (x, y, z), got {type(p).__name__}") from exc
+    if a.shape != (3,) or not np.all(np.isfinite(a)):
+        raise ValueError(f"{name}: expected three finite numbers (x, y, z), got {a.tolist()!r}")
+    return a.tolist()

@@ -7,6 +7,8 @@ image is by thresholding transformed into a binary image" (Figure G.1.B).
 
 from __future__ import annotations
 
+import math
+
 import cv2
 import numpy as np
 from numpy.typing import NDArray
@@ -124,20 +126,28 @@ def threshold(gray: NDArray[np.uint8], *, window: int = 9, offset: float = 7.0,
 
     Raises
     ------
+    TypeError
+        If ``gray`` is not a numpy array.
     ValueError
-        If ``window`` is not an odd integer >= 3 (or, compiled, above 255).
+        If ``gray`` is not a non-empty (H, W) uint8 image (both ways: the compiled threshold
+        used to cast other types silently, wrapping 300 to 44 and -1 to 255), ``window`` not
+        an odd integer >= 3 (or, compiled, above 255) or ``offset`` not finite.
     RuntimeError
         If ``native=True`` and the compiled module was not built.
     """
-    if window < 3 or window % 2 == 0:
-        raise ValueError(f"window must be an odd integer >= 3, got {window}")
+    if not isinstance(gray, np.ndarray):
+        raise TypeError(f"gray: expected a numpy array, got {type(gray).__name__}")
+    if gray.dtype != np.uint8 or gray.ndim != 2 or not gray.size:
+        raise ValueError(f"gray must be a non-empty (H, W) uint8 image, got shape {gray.shape} {gray.dtype}")
+    if isinstance(window, bool) or not isinstance(window, (int, np.integer)) or window < 3 or window % 2 == 0:
+        raise ValueError(f"window must be an odd integer >= 3, got {window!r}")
+    if not math.isfinite(offset):
+        raise ValueError(f"offset must be a finite number, got {offset!r}")
     idelta = int(np.floor(offset))
     if native is None and (window > 255 or abs(idelta) > 1024):
         native = False  # beyond the compiled loop's integer ranges
     if use_compiled(native, _threshold, "visloc.markers._threshold"):
-        g = np.ascontiguousarray(gray, np.uint8)
-        if g.ndim != 2 or not g.size:
-            raise ValueError(f"gray must be a non-empty (H, W) uint8 image, got shape {g.shape}")
+        g = np.ascontiguousarray(gray)
         out = np.empty_like(g)
         _threshold.mean_threshold(g, out, g.shape[0], g.shape[1], int(window), idelta)
         return out

@@ -348,6 +348,15 @@ class MarkerDetector:
         Fields of :class:`DetectorParams` (e.g. ``offset=5``, ``refine=False``);
         ``passes`` may be given as ``[(scale, window), ...]``.
 
+    Raises
+    ------
+    TypeError
+        An unknown parameter, ``candidates`` not a ``CandidateFilter``, or ``board_retry``,
+        ``refine`` or ``bend`` not a bool.
+    ValueError
+        An unknown dictionary, or a parameter out of its range (every field of
+        :class:`DetectorParams` is checked here, not at the first frame; the message names it).
+
     Examples
     --------
     >>> det = MarkerDetector("DICT_4X4_50")
@@ -365,17 +374,7 @@ class MarkerDetector:
             if key in params:
                 params[key] = tuple(_as_pass(p) for p in params[key])  # type: ignore[union-attr]
         self.params = replace(DetectorParams(), **params)  # type: ignore[arg-type]
-        if not self.params.passes or not self.params.dark_passes:
-            raise ValueError("passes, dark_passes: at least one search pass is needed")
-        if isinstance(self.params.erode, bool) or not 0 <= self.params.erode <= 5:
-            raise ValueError(f"erode must be 0 to 5 px, got {self.params.erode!r}")
-        most = self.params.refine_max_iterations
-        if isinstance(most, bool) or not isinstance(most, (int, np.integer)) or not 1 <= most <= 100:
-            raise ValueError(f"refine_max_iterations must be an integer from 1 to 100, got {most!r}")
-        for key in ("refine_tolerance", "small_side"):
-            value = getattr(self.params, key)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value < math.inf:
-                raise ValueError(f"{key} must be a finite number >= 0, got {value!r}")
+        _check_params(self.params)
         # the lenient first look at a candidate's cells (before stage 6) allows this many white
         # bits: the dictionary's range widened by the correctable errors, and one more
         slack = int(self.dictionary.max_correction * self.params.error_correction_rate) + 1
@@ -385,12 +384,6 @@ class MarkerDetector:
         # the inverted image's grey level v holds the light 255 - lut[255 - v] of the original
         self._luts = {False: lut, True: 255.0 - lut[::-1]}
         bb = self.params.border_bits
-        if isinstance(bb, bool) or not isinstance(bb, (int, np.integer)) or not 1 <= bb <= 3:
-            raise ValueError(f"border_bits must be 1, 2 or 3, got {bb!r}")
-        if self.params.native is not None and not isinstance(self.params.native, bool):
-            raise ValueError(f"native must be True, False or None, got {self.params.native!r}")
-        if self.params.inverted not in (False, True, "both") or not isinstance(self.params.inverted, (bool, str)):
-            raise ValueError(f"inverted must be False, True or 'both', got {self.params.inverted!r}")
         # each id's cells (1 = white) with its border, as seen at 0-3 quarter turns (decode's r)
         codes = np.pad(self.dictionary.bits, ((0, 0), (bb, bb), (bb, bb)))
         self._cells_seen = np.stack([np.rot90(codes, r, axes=(1, 2)) for r in range(4)], axis=1)
@@ -876,9 +869,53 @@ class MarkerDetector:
         return cells
 
 
+def _check_params(p: DetectorParams) -> None:
+    """Raise a ValueError naming the first field of ``p`` out of its range (a TypeError for
+    ``candidates`` not a :class:`~visloc.markers.contours.CandidateFilter` and a switch that
+    is not a bool): every field is checked when the detector is made, not at its first frame."""
+    if not p.passes or not p.dark_passes:
+        raise ValueError("passes, dark_passes: at least one search pass is needed")
+    if not isinstance(p.candidates, CandidateFilter):
+        raise TypeError(f"candidates: expected a CandidateFilter, got {type(p.candidates).__name__}")
+    for key in ("board_retry", "refine", "bend"):
+        if not isinstance(getattr(p, key), (bool, np.bool_)):
+            raise TypeError(f"{key} must be True or False, got {getattr(p, key)!r}")
+    ints = {"erode": (0, 5), "refine_max_iterations": (1, 100), "refine_iterations": (1, p.refine_max_iterations),
+            "refine_max_radius": (1, 50), "refine_profiles": (2, 1000), "border_bits": (1, 3),
+            "min_pass_size": (0, None), "base_height": (16, None)}
+    for key, (lo, hi) in ints.items():
+        v = getattr(p, key)
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo or (hi is not None and v > hi):
+            raise ValueError(f"{key} must be an integer from {lo}" + (f" to {hi}" if hi is not None else " up")
+                             + f", got {v!r}")
+    if p.refine_radius is not None and (isinstance(p.refine_radius, bool) or not isinstance(
+            p.refine_radius, (int, np.integer)) or not 1 <= p.refine_radius <= 50):
+        raise ValueError(f"refine_radius must be None or an integer from 1 to 50, got {p.refine_radius!r}")
+    # real fields: (least, largest, whether the largest is allowed); None: no bound
+    reals = {"refine_tolerance": (0.0, None, True), "small_side": (0.0, None, True), "dark_mean": (0.0, None, True),
+             "blur_sigma": (0.0, 10.0, True), "offset": (-255.0, 255.0, True), "corner_padding": (0.0, 0.5, False),
+             "border_error_rate": (0.0, 1.0, True), "min_quiet_zone": (0.0, 1.0, True),
+             "cell_margin": (0.0, 0.5, False), "error_correction_rate": (0.0, 1.0, True),
+             "corner_sigma": (0.0, None, True), "bit_threshold": (0.0, 1.0, True)}
+    for key, (lo, hi, closed) in reals.items():
+        v = getattr(p, key)
+        if v is None and key in ("corner_sigma", "bit_threshold"):
+            continue
+        ok = not isinstance(v, bool) and isinstance(v, (int, float, np.integer, np.floating)) and math.isfinite(v)
+        if not ok or v < lo or (hi is not None and (v > hi or (v == hi and not closed))):
+            top = "" if hi is None else (f" and <= {hi:g}" if closed else f" and < {hi:g}")
+            raise ValueError(f"{key} must be a finite number >= {lo:g}{top}, got {v!r}")
+    if p.corner_sigma is not None and p.corner_sigma <= 0:
+        raise ValueError(f"corner_sigma must be None or > 0, got {p.corner_sigma!r}")
+    if p.native is not None and not isinstance(p.native, bool):
+        raise ValueError(f"native must be True, False or None, got {p.native!r}")
+    if p.inverted not in (False, True, "both") or not isinstance(p.inverted, (bool, str)):
+        raise ValueError(f"inverted must be False, True or 'both', got {p.inverted!r}")
+
+
 def _as_pass(p: object) -> SearchPass:
     sp = p if isinstance(p, SearchPass) else SearchPass(*p)  # type: ignore[misc]
-    if not sp.scale >= 1:
+    if not isinstance(sp.scale, (int, float, np.integer, np.floating)) or not 1 <= sp.scale < math.inf:
         raise ValueError(f"passes: scale must be >= 1, got {sp.scale}")
     if sp.window is not None and (sp.window < 3 or sp.window % 2 == 0):
         raise ValueError(f"passes: window must be an odd integer >= 3, got {sp.window}")

@@ -116,3 +116,24 @@ def check_number(
     if high is not None and (v > high or (high_open and v == high)):
         raise ValueError(f"{name} must be {'<' if high_open else '<='} {high}, got {v}")
     return v
+
+
+def check_rng(rng: object, *, allow_none: bool = True) -> np.random.Generator:
+    """``rng`` as a numpy Generator: a Generator itself, a seed (an int >= 0) or, with
+    ``allow_none``, None (fresh entropy).
+
+    Raises
+    ------
+    TypeError
+        Anything else (a bool or a float seed too); the message names ``rng``.
+    ValueError
+        A negative seed (numpy's own message did not name the argument).
+    """
+    if isinstance(rng, np.random.Generator) or (rng is None and allow_none):
+        return np.random.default_rng(rng)
+    if isinstance(rng, bool) or not isinstance(rng, (int, np.integer)):
+        what = "a numpy Generator, an int seed or None" if allow_none else "a numpy Generator or an int seed"
+        raise TypeError(f"rng must be {what}, got {type(rng).__name__}")
+    if rng < 0:
+        raise ValueError(f"rng: a seed must be an integer >= 0, got {rng}")
+    return np.random.default_rng(int(rng))

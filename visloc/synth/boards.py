@@ -26,7 +26,7 @@ from scipy.spatial.transform import Rotation
 
 from visloc._checks import check_int
 from visloc.markers.dictionary import Dictionary, load_dictionary
-from visloc.synth._checks import check_camera, check_number, check_size
+from visloc.synth._checks import check_camera, check_number, check_rng, check_size
 from visloc.synth.camera import CameraEffects
 from visloc.synth.markers import (
     MarkerRender,
@@ -339,10 +339,7 @@ def random_board_scene(
     TypeError, ValueError
         On a malformed argument; the message names it.
     """
-    if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool):
-        rng = np.random.default_rng(int(rng))
-    if not isinstance(rng, np.random.Generator):
-        raise TypeError(f"rng must be a numpy Generator or an int seed, got {type(rng).__name__}")
+    rng = check_rng(rng, allow_none=False)
     w, h = check_size(size)
     if min(w, h) < 160:
         raise ValueError(f"size must be at least (160, 160) for a board scene, got {(w, h)}")

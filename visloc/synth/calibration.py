@@ -10,6 +10,7 @@ import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from visloc._checks import check_int
 from visloc.boards.charuco import CharucoBoard
 from visloc.pose.maps import MarkerMap
 from visloc.synth.camera import CameraEffects
@@ -45,7 +46,7 @@ def calibration_views(board: CharucoBoard, n: int, *, size: tuple[int, int] = (1
     size : (int, int)
         ``(width, height)``, px.
     seed : int
-        Seeds the poses and the noise.
+        Seeds the poses and the noise (>= 0).
     camera : CameraEffects
         The camera model (its k1, k2 are the true distortion).
     hfov_deg : float
@@ -56,12 +57,17 @@ def calibration_views(board: CharucoBoard, n: int, *, size: tuple[int, int] = (1
     list of CharucoRender
         Each with its image, the true ``K`` and ``dist`` (``render.K``, ``render.dist``) and
         the corners' truth.
+
+    Raises
+    ------
+    TypeError, ValueError
+        ``n`` not an integer in [1, 500]; ``seed`` not an integer >= 0 (the message names it).
     """
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 1 <= n <= 500:
         raise ValueError(f"n must be an integer in [1, 500], got {n!r}")
     w, h = size
     K = default_camera((w, h), hfov_deg=hfov_deg)
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(check_int(seed, "seed", low=0))
     width = board.squares_x * board.square_length
     centre = np.array([0.5 * width, 0.5 * board.squares_y * board.square_length, 0.0])
     out: list[CharucoRender] = []
@@ -120,7 +126,7 @@ def marker_map_views(marker_map: MarkerMap, dictionary: str, n: int, *, size: tu
         raise ValueError(f"n must be an integer in [1, 500], got {n!r}")
     w, h = size
     K = default_camera((w, h), hfov_deg=hfov_deg)
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(check_int(seed, "seed", low=0))
     pts = np.concatenate([marker_map.corners_of(int(i)) for i in marker_map.ids])
     centre, width = 0.5 * (pts.min(axis=0) + pts.max(axis=0)), float(np.ptp(pts[:, 0]))
     from_above = Rotation.from_euler("x", 180.0, degrees=True)

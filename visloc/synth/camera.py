@@ -29,7 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from visloc._checks import check_int
 from visloc.markers.response import srgb_to_linear
-from visloc.synth._checks import check_camera, check_number, check_size
+from visloc.synth._checks import check_camera, check_number, check_rng, check_size
 from visloc.synth.textures import motion_kernel
 
 FloatArray = NDArray[np.float64]
@@ -389,11 +389,7 @@ def apply_camera(
     k_ideal = k if ideal_K is None else check_camera(ideal_K)
     if not isinstance(effects, CameraEffects):
         raise TypeError(f"effects must be a CameraEffects, got {type(effects).__name__}")
-    if rng is not None and not isinstance(rng, (np.random.Generator, int, np.integer)):
-        raise TypeError(
-            f"rng must be a numpy Generator, an int seed or None, got {type(rng).__name__}"
-        )
-    gen = np.random.default_rng(rng)
+    gen = check_rng(rng)
     w, h = (img.shape[1], img.shape[0]) if size is None else check_size(size)
     e = effects
 

@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from visloc._checks import check_int
 from visloc.markers.dictionary import Dictionary, load_dictionary
-from visloc.synth._checks import check_number, check_size
+from visloc.synth._checks import check_camera, check_number, check_size
 from visloc.synth.markers import MarkerRender, render_markers
 from visloc.synth.scenes import DIFFICULTIES, MARKER_LENGTH, default_camera, random_scene
 from visloc.synth.textures import make_background
@@ -54,14 +54,32 @@ def write_camera_yml(path: str | Path, K: FloatArray, size: tuple[int, int],
     -------
     Path
         ``path``.
+
+    Raises
+    ------
+    TypeError, ValueError
+        ``K``, ``size`` or ``dist`` malformed (``K`` as :func:`visloc.synth._checks.check_camera`
+        checks it; ``dist`` not 4 to 14 finite numbers), or ``path``'s folder missing (before,
+        OpenCV's own error); the message names the argument. Nothing is written then.
     """
     path = Path(path)
-    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    k = check_camera(K)
+    w, h = check_size(size)
     try:
-        fs.write("image_width", int(size[0]))
-        fs.write("image_height", int(size[1]))
-        fs.write("camera_matrix", np.asarray(K, np.float64))
         coeffs = np.zeros(5) if dist is None else np.asarray(dist, np.float64).ravel()
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"dist: expected numbers, got {type(dist).__name__}") from exc
+    if not 4 <= coeffs.size <= 14 or not np.all(np.isfinite(coeffs)):
+        raise ValueError(f"dist: expected 4 to 14 finite coefficients, got {coeffs.tolist()!r}")
+    if not path.parent.is_dir():
+        raise ValueError(f"path: folder {path.parent} does not exist")
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    if not fs.isOpened():
+        raise ValueError(f"path: cannot write {path}")
+    try:
+        fs.write("image_width", w)
+        fs.write("image_height", h)
+        fs.write("camera_matrix", k)
         fs.write("distortion_coefficients", coeffs.reshape(1, -1))
     finally:
         fs.release()

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from visloc._checks import check_int
 from visloc.synth._checks import check_number
 
 FloatArray = NDArray[np.float64]
@@ -163,8 +164,7 @@ def imu_stream(
     """
     seconds = check_number(seconds, "seconds", low=0.0, low_open=True)
     rate_hz = check_number(rate_hz, "rate_hz", low=0.0, low_open=True)
-    if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool):
-        raise TypeError(f"seed must be an int, got {type(seed).__name__}")
+    seed = check_int(seed, "seed", low=0)
     bias = np.asarray(gyro_bias, dtype=np.float64)
     if bias.shape != (3,) or not np.all(np.isfinite(bias)):
         raise ValueError(f"gyro_bias must be 3 finite numbers (rad/s), got {gyro_bias!r}")

@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 
 from visloc._checks import check_int
 from visloc.markers.dictionary import Dictionary, load_dictionary
-from visloc.synth._checks import check_camera, check_number, check_size
+from visloc.synth._checks import check_camera, check_number, check_rng, check_size
 from visloc.synth.camera import (
     CameraEffects,
     apply_camera,
@@ -316,6 +316,11 @@ def _check_placements(placements: object, dictionary: Dictionary) -> list[Placem
         pose = item[1]
         if np.shape(pose.R) != (3, 3) or np.shape(pose.t) != (3,):
             raise ValueError(f"placements[{i}] pose must have R (3, 3) and t (3,)")
+        R, t = np.asarray(pose.R, float), np.asarray(pose.t, float)
+        if not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))) or not np.allclose(
+                R.T @ R, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+            # a NaN pose used to render as no marker at all, with NaN corners as its truth
+            raise ValueError(f"placements[{i}] pose: R must be a finite rotation matrix and t finite")
         length = check_number(item[2], f"placements[{i}] length", low=0.0, low_open=True)
         out.append((marker_id, Pose(np.asarray(pose.R, float), np.asarray(pose.t, float)), length))
     return out
@@ -520,11 +525,10 @@ def _check_degradations(camera: object, rng: object, *, blur_sigma: object, moti
         "gradient": check_number(gradient, "gradient", low=0.0, high=1.0, high_open=True),
         "jpeg_quality": None if jpeg_quality is None else check_int(jpeg_quality, "jpeg_quality", low=1, high=100),
     }
-    if rng is not None and not isinstance(rng, (np.random.Generator, int, np.integer)):
-        raise TypeError(f"rng must be a numpy Generator, an int seed or None, got {type(rng).__name__}")
+    gen = check_rng(rng)
     if camera is not None:
         _check_camera_effects(camera, **deg)
-    return deg, np.random.default_rng(rng)
+    return deg, gen
 
 
 def _check_camera_effects(camera: object, **degradations: object) -> None:

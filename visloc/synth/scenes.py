@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from visloc._checks import check_int
 from visloc.markers.dictionary import Dictionary, load_dictionary
-from visloc.synth._checks import check_number, check_size
+from visloc.synth._checks import check_number, check_rng, check_size
 from visloc.synth.camera import CameraEffects
 from visloc.synth.markers import MarkerRender, render_markers
 from visloc.synth.textures import TEXTURES
@@ -283,10 +283,7 @@ def random_scene(
     RuntimeError
         Markers that cannot be placed.
     """
-    if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool):
-        rng = np.random.default_rng(int(rng))
-    if not isinstance(rng, np.random.Generator):
-        raise TypeError(f"rng must be a numpy Generator or an int seed, got {type(rng).__name__}")
+    rng = check_rng(rng, allow_none=False)
     w, h = check_size(size)
     if difficulty not in DIFFICULTIES:
         raise ValueError(f"difficulty must be one of {DIFFICULTIES}, got {difficulty!r}")

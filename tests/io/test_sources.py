@@ -272,6 +272,12 @@ def test_a_video_with_corrupt_bytes_is_read_past_them_and_says_so(tmp_path: Path
     assert [f.index for f in frames] == list(range(len(frames)))
     assert [f.time for f in frames[:97]] == pytest.approx([k / 30 for k in range(97)], abs=1e-3)
     assert all(f.name.endswith(f"#{f.index}") for f in lost)
+    after = [f for f in good if f.index > max(f.index for f in lost) + 12]  # past mp4v's next key frame
+
+    def off(f, k):
+        return float(np.abs(f.image.astype(int) - clean[k].image).mean())
+    assert len(after) > 25 and all(off(f, f.index) < 1 < min(off(f, f.index - 1), off(f, f.index + 1))
+                                   for f in after[:-1])  # each in its place
     end = [f for f in frames if f.name.endswith("#end")]
     if len(frames) - len(end) < 100:  # fewer than declared: one last row says so
         assert end == [frames[-1]] and "of 100 the container declares" in end[0].error
@@ -305,3 +311,36 @@ def test_one_path_is_not_a_list_of_paths():
     with pytest.raises(TypeError, match=r"pass \['a.png'\]"):
         ImageListSource("a.png")
     assert len(ImageListSource(["a.png"])) == 1
+
+
+def _avi(path: Path, n: int = 40) -> bytes:
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 30, (64, 48))
+    for i in range(n):
+        writer.write(np.full((48, 64, 3), 5 * i, np.uint8))
+    writer.release()
+    return path.read_bytes()
+
+
+def test_the_avi_index_names_the_frames_whose_chunks_are_gone(tmp_path: Path) -> None:
+    from visloc.io.avi_index import avi_unreadable_frames
+
+    data = bytearray(_avi(tmp_path / "v.avi"))
+    assert avi_unreadable_frames(tmp_path / "v.avi") == frozenset()
+    movi = data.find(b"movi") + 4
+    heads = [m for m in range(movi, len(data) - 4) if data[m : m + 4] == b"00dc"][:40]
+    for k in (0, 7, 39):  # the first, one inside and the last frame's chunk headers zeroed
+        data[heads[k] : heads[k] + 8] = bytes(8)
+    (tmp_path / "bad.avi").write_bytes(bytes(data))
+    assert avi_unreadable_frames(tmp_path / "bad.avi") == {0, 7, 39}
+    frames = list(open_source(tmp_path / "bad.avi"))
+    assert [f.index for f in frames] == list(range(40))  # no end row: every frame is accounted for
+    assert [f.index for f in frames if f.image is None] == [0, 7, 39]
+    assert all(f.error is None and abs(float(f.image.mean()) - 5 * f.index) < 2 for f in frames if f.image is not None)
+    assert [f.time for f in frames] == pytest.approx([k / 30 for k in range(40)])
+    (tmp_path / "cut.avi").write_bytes(bytes(data[: len(data) * 2 // 3]))  # the index is written last
+    (tmp_path / "empty.avi").write_bytes(b"")
+    for name in ("cut.avi", "empty.avi"):
+        assert avi_unreadable_frames(tmp_path / name) is None
+    assert avi_unreadable_frames(tmp_path / "missing.avi") is None
+    (tmp_path / "riff.avi").write_bytes(b"RIFF\x04\x00\x00\x00AVI ")  # a header and nothing else
+    assert avi_unreadable_frames(tmp_path / "riff.avi") is None

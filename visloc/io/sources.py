@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from visloc.images import to_uint8
+from visloc.io.avi_index import avi_unreadable_frames
 from visloc.io.closing import Closing
 from visloc.types import Frame
 
@@ -238,7 +239,11 @@ class VideoSource(FrameSource):
     ``CAP_PROP_FPS`` (never back). A frame the decoder cannot
     deliver (corrupt bytes) comes as a frame without an image at its own index (its time between
     its neighbours'), its ``error`` saying so, and reading goes on (the frames after keep their
-    indices); the stream ends after :data:`MAX_BAD_READS` failed reads in a row. When fewer
+    indices); the stream ends after :data:`MAX_BAD_READS` failed reads in a row. In an AVI file
+    the frames whose chunks its index cannot find (:func:`visloc.io.avi_index.avi_unreadable_frames`)
+    are such frames too, whether the backend fails their reads (OpenCV 5.0) or skips them
+    without a word (5.1); the frames of such a file are timed ``index / fps`` (the container's
+    stamps, renumbered past a skipped frame, are not used). When fewer
     frames arrived than the container declares (a truncated file), a last frame without an
     image says so in its ``error`` (the commands count and report both). Each new iteration
     starts again from the first frame.
@@ -261,6 +266,7 @@ class VideoSource(FrameSource):
         self.fps = _check_fps(fps)
         self._capture = self._open()
         self._fresh = True
+        self._unreadable = avi_unreadable_frames(self.path) or frozenset()
         count = int(self._capture.get(cv2.CAP_PROP_FRAME_COUNT))
         self.frame_count: int | None = count if count > 0 else None
         native = self._capture.get(cv2.CAP_PROP_FPS)
@@ -289,7 +295,8 @@ class VideoSource(FrameSource):
         capture = self._capture
         index = lost = bad = 0
         last_time = -math.inf
-        clock = _FrameClock(self.fps or self.native_fps, stamps=self.fps is None)
+        skip = self._unreadable
+        clock = _FrameClock(self.fps or self.native_fps, stamps=self.fps is None and not skip)
         while not self._closed:
             ok, image = capture.read()
             if not ok or image is None:
@@ -298,7 +305,10 @@ class VideoSource(FrameSource):
                     break
                 continue
             # failed reads followed by a good frame: each lost one frame (OpenCV reads one frame
-            # a call), recorded at its place so that the frames after keep their indices
+            # a call), recorded at its place so that the frames after keep their indices; then
+            # the frames the AVI's index cannot find, which the backend may skip without a failed read
+            while index + bad in skip:
+                bad += 1
             t = clock.time(index + bad, capture.get(cv2.CAP_PROP_POS_MSEC) / 1000.0)
             for k in range(bad):
                 lost_t = (last_time + (t - last_time) * (k + 1) / (bad + 1) if math.isfinite(last_time)
@@ -313,6 +323,11 @@ class VideoSource(FrameSource):
             index += 1
         if self._closed:
             return
+        while index in skip:  # the last frames, unreadable by the AVI's index
+            yield Frame(index, clock.time(index, math.nan), None, f"{self.path}#{index}",
+                        f"video {self.path}: frame {index} could not be decoded (corrupt bytes); skipped")
+            index += 1
+            lost += 1
         if self.frame_count is not None and index < self.frame_count:
             yield Frame(index, max(last_time, 0.0), None, f"{self.path}#end",
                         f"video {self.path}: {index} frames read of {self.frame_count} the container declares "

@@ -85,10 +85,11 @@ def methods(grid, video=False):
             f.markers.append(0 if ids is None else len(ids))
             if ids is None:
                 return None
-            obj = np.concatenate([grid.corners_of(int(i)) for i in ids.ravel() if int(i) in grid])
-            img_pts = np.concatenate([c.reshape(4, 2) for c, i in zip(corners, ids.ravel()) if int(i) in grid])
-            if len(obj) < 4:
+            keep = [(c, int(i)) for c, i in zip(corners, ids.ravel(), strict=True) if int(i) in grid]
+            if not keep:  # only ids the grid does not hold (OpenCV 5.1 found such on a hard frame)
                 return None
+            obj = np.concatenate([grid.corners_of(i) for _, i in keep])
+            img_pts = np.concatenate([c.reshape(4, 2) for c, _ in keep])
             ok, rvec, tvec = cv2.solvePnP(obj, img_pts.astype(np.float64), K, None, flags=cv2.SOLVEPNP_ITERATIVE)
             return (cv2.Rodrigues(rvec)[0], tvec.ravel()) if ok else None
         f.markers = []

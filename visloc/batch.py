@@ -321,7 +321,21 @@ def _write_manifest(outdir: Path, command: str, options: list[str], finished: se
 
 def write_summary(outdir: str | os.PathLike[str], results: Sequence[RecordingResult]) -> Path:
     """``summary.csv`` in ``outdir``: one row per recording (written atomically), and the same
-    table as ``summary.parquet`` where pyarrow is installed."""
+    table as ``summary.parquet`` where pyarrow is installed.
+
+    Parameters
+    ----------
+    outdir : str or os.PathLike
+        The batch's output folder (it exists).
+    results : sequence of RecordingResult
+        One per recording, in any order (the rows are sorted by recording); floats are written
+        with three decimals, columns :data:`SUMMARY_COLUMNS`.
+
+    Returns
+    -------
+    pathlib.Path
+        The CSV file written.
+    """
     import csv
 
     buf = io.StringIO()

@@ -83,6 +83,18 @@ def check_pose_inputs(
 ) -> None:
     """Check the optional pose arguments shared by the drawing and logging functions.
 
+    Parameters
+    ----------
+    detections : sequence of MarkerDetection
+        The markers drawn or logged.
+    poses : sequence of (Pose or None), or None
+        One entry per detection (None where a marker has no pose), or None: then nothing
+        else is checked.
+    camera : Camera or None
+        Intrinsics the poses are drawn with (needed with ``poses``).
+    marker_length : float or None
+        Marker side, m (finite and > 0; needed with ``poses``).
+
     Raises
     ------
     ValueError

@@ -315,6 +315,16 @@ def profile_stride(n: int | NDArray) -> int | NDArray:
     1 % of the contour, whose peaks only need to fall inside the padding that
     :func:`split_sides` leaves out next to each corner; and the cost of the smoothing and the
     peak search no longer grows with the marker's size.
+
+    Parameters
+    ----------
+    n : int or ndarray of int
+        Contour length(s), points.
+
+    Returns
+    -------
+    int or ndarray of int
+        The stride(s), >= 1: ``n // 128`` where that is larger.
     """
     return max(1, int(n) // 128) if np.isscalar(n) else np.maximum(1, np.asarray(n) // 128)
 

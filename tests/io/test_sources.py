@@ -344,3 +344,38 @@ def test_the_avi_index_names_the_frames_whose_chunks_are_gone(tmp_path: Path) ->
     assert avi_unreadable_frames(tmp_path / "missing.avi") is None
     (tmp_path / "riff.avi").write_bytes(b"RIFF\x04\x00\x00\x00AVI ")  # a header and nothing else
     assert avi_unreadable_frames(tmp_path / "riff.avi") is None
+
+
+def test_frames_a_matroska_demuxer_drops_keep_their_places(tmp_path: Path) -> None:
+    path = tmp_path / "v.mkv"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 30, (160, 120))
+    for i in range(100):
+        img = np.full((120, 160, 3), (2 * i) % 255, np.uint8)
+        cv2.putText(img, str(i), (20, 60), 0, 1, (255, 255, 255), 2)
+        writer.write(img)
+    writer.release()
+    clean = list(open_source(path))
+    assert len(clean) == 100 and all(f.error is None for f in clean)
+    data = bytearray(path.read_bytes())
+    data[len(data) // 2 : len(data) // 2 + 3000] = bytes(3000)  # the demuxer skips what it cannot parse
+    (tmp_path / "bad.mkv").write_bytes(bytes(data))
+    frames = list(open_source(tmp_path / "bad.mkv"))
+    assert [f.index for f in frames] == list(range(100))  # every slot accounted for, no end row
+    lost = [f for f in frames if f.image is None]
+    assert lost and all("timestamps skip it" in f.error or "could not be decoded" in f.error for f in lost)
+    assert [f.time for f in frames] == pytest.approx([k / 30 for k in range(100)], abs=2e-3)
+    after = [f for f in frames if f.image is not None and f.index > lost[-1].index]
+    assert len(after) > 30 and all(np.array_equal(f.image, clean[f.index].image) for f in after)
+
+
+def test_stamp_gaps_count_missing_periods_only_in_a_constant_rate_stream() -> None:
+    from visloc.io.sources import _StampGaps
+
+    gaps = _StampGaps(30.0)
+    stamps = [0.0, 0.033, 0.067, 0.1, 0.233, 0.267]  # whole milliseconds, as Matroska stamps; 3 frames gone
+    assert [gaps.missing(s) for s in stamps] == [0, 0, 0, 0, 3, 0]
+    jitter = _StampGaps(30.0)  # a variable-rate stream: after its first uneven step, no gap is told
+    assert [jitter.missing(s) for s in (0.0, 0.02, 0.1, 0.2)] == [0, 0, 0, 0]
+    assert [_StampGaps(None).missing(s) for s in (0.0, 1.0)] == [0, 0]
+    nan = _StampGaps(30.0)
+    assert [nan.missing(s) for s in (0.0, math.nan, 0.1)] == [0, 0, 0]

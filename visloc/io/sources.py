@@ -243,7 +243,10 @@ class VideoSource(FrameSource):
     the frames whose chunks its index cannot find (:func:`visloc.io.avi_index.avi_unreadable_frames`)
     are such frames too, whether the backend fails their reads (OpenCV 5.0) or skips them
     without a word (5.1); the frames of such a file are timed ``index / fps`` (the container's
-    stamps, renumbered past a skipped frame, are not used). When fewer
+    stamps, renumbered past a skipped frame, are not used). Where a constant-rate stream's
+    stamps skip frame periods (a demuxer that drops damaged frames without a failed read, as
+    OpenCV 5.1's does in Matroska files), the frames missing are recorded at their indices the
+    same way. When fewer
     frames arrived than the container declares (a truncated file), a last frame without an
     image says so in its ``error`` (the commands count and report both). Each new iteration
     starts again from the first frame.
@@ -296,7 +299,9 @@ class VideoSource(FrameSource):
         index = lost = bad = 0
         last_time = -math.inf
         skip = self._unreadable
-        clock = _FrameClock(self.fps or self.native_fps, stamps=self.fps is None and not skip)
+        stamps = self.fps is None and not skip
+        clock = _FrameClock(self.fps or self.native_fps, stamps=stamps)
+        gaps = _StampGaps(self.native_fps if stamps else None)
         while not self._closed:
             ok, image = capture.read()
             if not ok or image is None:
@@ -305,16 +310,20 @@ class VideoSource(FrameSource):
                     break
                 continue
             # failed reads followed by a good frame: each lost one frame (OpenCV reads one frame
-            # a call), recorded at its place so that the frames after keep their indices; then
-            # the frames the AVI's index cannot find, which the backend may skip without a failed read
+            # a call), recorded at its place so that the frames after keep their indices; as many
+            # as a constant-rate stream's stamps skip, if more (a demuxer that drops frames
+            # without a failed read); then the frames the AVI's index cannot find
+            stamp = capture.get(cv2.CAP_PROP_POS_MSEC) / 1000.0
+            failed, bad = bad, max(bad, gaps.missing(stamp))
             while index + bad in skip:
                 bad += 1
-            t = clock.time(index + bad, capture.get(cv2.CAP_PROP_POS_MSEC) / 1000.0)
+            why = ("could not be decoded (corrupt bytes)" if failed or skip else
+                   "is missing: the stream's timestamps skip it (corrupt or dropped)")
+            t = clock.time(index + bad, stamp)
             for k in range(bad):
                 lost_t = (last_time + (t - last_time) * (k + 1) / (bad + 1) if math.isfinite(last_time)
                           else max(t - (bad - k) * clock.step, 0.0))
-                yield Frame(index, lost_t, None, f"{self.path}#{index}",
-                            f"video {self.path}: frame {index} could not be decoded (corrupt bytes); skipped")
+                yield Frame(index, lost_t, None, f"{self.path}#{index}", f"video {self.path}: frame {index} {why}; skipped")
                 index += 1
             lost += bad
             bad = 0
@@ -337,6 +346,32 @@ class VideoSource(FrameSource):
         """Release the capture."""
         self._capture.release()
         super().close()
+
+
+class _StampGaps:
+    """Frames missing from a constant-rate stream, told by its timestamps: while every step
+    between stamps has been a whole number of frame periods (within :attr:`TOLERANCE` of one),
+    a step of k periods holds k - 1 missing frames; from the first step that is not (a
+    variable-rate stream, or no rate) no gap is told again."""
+
+    TOLERANCE = 0.1  # of a period (Matroska stamps whole milliseconds: 33 or 34 ms at 30 fps)
+
+    def __init__(self, rate: float | None) -> None:
+        self.period = 1.0 / rate if rate else None
+        self.last: float | None = None
+
+    def missing(self, stamp: float) -> int:
+        """The frames missing between the last stamp given and ``stamp`` (s)."""
+        if self.period is None:
+            return 0
+        last, self.last = self.last, stamp
+        if last is None:
+            return 0
+        k = round((stamp - last) / self.period) if math.isfinite(stamp - last) else 0
+        if k < 1 or abs(stamp - last - k * self.period) > self.TOLERANCE * self.period:
+            self.period = None  # not a constant-rate stream: its steps tell nothing
+            return 0
+        return k - 1
 
 
 class _FrameClock:

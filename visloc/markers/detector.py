@@ -939,14 +939,17 @@ def _clockwise(quads: NDArray) -> NDArray:
     """Quads (K, 4, 2) ordered clockwise in the image, each from its first corner
     (:func:`visloc.markers.corners.orient_clockwise` for all at once)."""
     ccw = _areas(quads) <= 0
-    quads[ccw] = quads[ccw][:, [0, 3, 2, 1]]
+    if ccw.any():
+        quads[ccw] = quads[ccw][:, [0, 3, 2, 1]]
     return quads
 
 
 def _areas(q: NDArray) -> NDArray:
-    """Signed areas of quads (..., 4, 2); positive for clockwise quads in y-down images."""
-    x, y = q[..., 0], q[..., 1]
-    return 0.5 * ((x * y[..., _NEXT]).sum(-1) - (x[..., _NEXT] * y).sum(-1))
+    """Signed areas of quads (..., 4, 2); positive for clockwise quads in y-down images: half
+    the cross product of the diagonals (the shoelace sum of a quadrilateral, in 6 operations)."""
+    d1 = q[..., 0, :] - q[..., 2, :]
+    d2 = q[..., 1, :] - q[..., 3, :]
+    return 0.5 * (d1[..., 0] * d2[..., 1] - d2[..., 0] * d1[..., 1])
 
 
 def _small_in_group(quads: NDArray, small_side: float, packed: float = 1.3) -> NDArray[np.bool_]:

@@ -249,21 +249,28 @@ def test_an_image_too_small_to_use_is_an_unreadable_frame_and_the_folder_goes_on
     assert frames[1].image is not None
 
 
-@pytest.mark.parametrize("ext, fourcc", [(".avi", "MJPG"), (".mp4", "mp4v")])
-def test_a_video_with_corrupt_bytes_is_read_past_them_and_says_so(tmp_path: Path, ext: str, fourcc: str) -> None:
-    path = tmp_path / f"v{ext}"
+def _numbered_video(path: Path, fourcc: str) -> Path:
+    """100 frames of 160 x 120 at 30 fps, each its number on its own grey; ``bad<ext>`` beside it
+    with 3000 zero bytes in the middle of the file. Returns the bad file."""
     writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*fourcc), 30, (160, 120))
     for i in range(100):
         img = np.full((120, 160, 3), (2 * i) % 255, np.uint8)
         cv2.putText(img, str(i), (20, 60), 0, 1, (255, 255, 255), 2)
         writer.write(img)
     writer.release()
-    clean = list(open_source(path))
-    assert len(clean) == 100 and all(f.error is None for f in clean)
     data = bytearray(path.read_bytes())
     data[len(data) // 2 : len(data) // 2 + 3000] = bytes(3000)  # zeros in the middle of the stream
-    bad = tmp_path / f"bad{ext}"
+    bad = path.with_name(f"bad{path.suffix}")
     bad.write_bytes(bytes(data))
+    return bad
+
+
+@pytest.mark.parametrize("ext, fourcc", [(".avi", "MJPG"), (".mp4", "mp4v")])
+def test_a_video_with_corrupt_bytes_is_read_past_them_and_says_so(tmp_path: Path, ext: str, fourcc: str) -> None:
+    path = tmp_path / f"v{ext}"
+    bad = _numbered_video(path, fourcc)
+    clean = list(open_source(path))
+    assert len(clean) == 100 and all(f.error is None for f in clean)
     frames = list(open_source(bad))
     good = [f for f in frames if f.image is not None]
     assert len(good) > 60  # frames after the damage are read too (it used to stop there)
@@ -284,7 +291,8 @@ def test_a_video_with_corrupt_bytes_is_read_past_them_and_says_so(tmp_path: Path
     else:
         assert not end
     truncated = tmp_path / f"cut{ext}"
-    truncated.write_bytes(path.read_bytes()[: len(data) * 2 // 3])
+    data = path.read_bytes()
+    truncated.write_bytes(data[: len(data) * 2 // 3])
     if ext == ".mp4":  # its index is at the end: a cut file cannot be opened, and says so
         with pytest.raises(SourceError, match="cannot open video"):
             open_source(truncated)
@@ -348,18 +356,10 @@ def test_the_avi_index_names_the_frames_whose_chunks_are_gone(tmp_path: Path) ->
 
 def test_frames_a_matroska_demuxer_drops_keep_their_places(tmp_path: Path) -> None:
     path = tmp_path / "v.mkv"
-    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 30, (160, 120))
-    for i in range(100):
-        img = np.full((120, 160, 3), (2 * i) % 255, np.uint8)
-        cv2.putText(img, str(i), (20, 60), 0, 1, (255, 255, 255), 2)
-        writer.write(img)
-    writer.release()
+    bad = _numbered_video(path, "MJPG")  # the demuxer skips what it cannot parse
     clean = list(open_source(path))
     assert len(clean) == 100 and all(f.error is None for f in clean)
-    data = bytearray(path.read_bytes())
-    data[len(data) // 2 : len(data) // 2 + 3000] = bytes(3000)  # the demuxer skips what it cannot parse
-    (tmp_path / "bad.mkv").write_bytes(bytes(data))
-    frames = list(open_source(tmp_path / "bad.mkv"))
+    frames = list(open_source(bad))
     assert [f.index for f in frames] == list(range(100))  # every slot accounted for, no end row
     lost = [f for f in frames if f.image is None]
     assert lost and all("timestamps skip it" in f.error or "could not be decoded" in f.error for f in lost)

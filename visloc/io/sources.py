@@ -317,13 +317,11 @@ class VideoSource(FrameSource):
             failed, bad = bad, max(bad, gaps.missing(stamp))
             while index + bad in skip:
                 bad += 1
-            why = ("could not be decoded (corrupt bytes)" if failed or skip else
-                   "is missing: the stream's timestamps skip it (corrupt or dropped)")
             t = clock.time(index + bad, stamp)
             for k in range(bad):
                 lost_t = (last_time + (t - last_time) * (k + 1) / (bad + 1) if math.isfinite(last_time)
                           else max(t - (bad - k) * clock.step, 0.0))
-                yield Frame(index, lost_t, None, f"{self.path}#{index}", f"video {self.path}: frame {index} {why}; skipped")
+                yield self._lost(index, lost_t, by_stamps=not (failed or skip))
                 index += 1
             lost += bad
             bad = 0
@@ -333,14 +331,20 @@ class VideoSource(FrameSource):
         if self._closed:
             return
         while index in skip:  # the last frames, unreadable by the AVI's index
-            yield Frame(index, clock.time(index, math.nan), None, f"{self.path}#{index}",
-                        f"video {self.path}: frame {index} could not be decoded (corrupt bytes); skipped")
+            yield self._lost(index, clock.time(index, math.nan))
             index += 1
             lost += 1
         if self.frame_count is not None and index < self.frame_count:
             yield Frame(index, max(last_time, 0.0), None, f"{self.path}#end",
                         f"video {self.path}: {index} frames read of {self.frame_count} the container declares "
                         f"({lost} of them corrupt); the file ends early")
+
+    def _lost(self, index: int, t: float, *, by_stamps: bool = False) -> Frame:
+        """The row of a frame lost at ``index``: one the decoder or the AVI's index could not
+        deliver, or (``by_stamps``: no failed read) one the stream's stamps skip."""
+        why = ("is missing: the stream's timestamps skip it (corrupt or dropped)" if by_stamps
+               else "could not be decoded (corrupt bytes)")
+        return Frame(index, t, None, f"{self.path}#{index}", f"video {self.path}: frame {index} {why}; skipped")
 
     def close(self) -> None:
         """Release the capture."""

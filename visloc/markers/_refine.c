@@ -18,8 +18,8 @@
  * the two agree to about 0.01 px.
  *
  * refine_quads(gray, height, width, quads, radii, iterations, count, end_gap, lut, bend, force[, max_iterations,
- *              tol]) -> (corners, ok)
- *     (bend: stage 8b, bend_one, on every quad refined)
+ *              tol, bend_radius]) -> (corners, ok)
+ *     (bend: stage 8b, bend_one, on every quad refined, its profiles at most bend_radius px wide)
  *     gray: uint8 (H, W) bytes; quads: float64 (K, 4, 2); radii: int64 (K,); lut: float64 (256,),
  *     increasing; returns float64 (K, 4, 2) corners (the input where refinement failed) and
  *     uint8 (K,) flags, as bytes.
@@ -426,8 +426,9 @@ static PyObject *refine_quads(PyObject *self, PyObject *args) {
     Py_ssize_t h, w, count;
     int iterations, bend, force, max_iterations = 0;
     double end_gap, tol = 0.0;
-    if (!PyArg_ParseTuple(args, "y*nny*y*indy*pp|id", &gray, &h, &w, &quads, &radii, &iterations, &count, &end_gap,
-                          &lut, &bend, &force, &max_iterations, &tol))
+    Py_ssize_t bend_cap = 64; /* stage 8b's profile half-width at most (the quad's radius where smaller) */
+    if (!PyArg_ParseTuple(args, "y*nny*y*indy*pp|idn", &gray, &h, &w, &quads, &radii, &iterations, &count, &end_gap,
+                          &lut, &bend, &force, &max_iterations, &tol, &bend_cap))
         return NULL;
     if (max_iterations < iterations) max_iterations = iterations; /* 0 (not given): exactly `iterations` */
     Py_ssize_t k = quads.len / (8 * (Py_ssize_t)sizeof(double));
@@ -444,6 +445,8 @@ static PyObject *refine_quads(PyObject *self, PyObject *args) {
         bad = "end_gap must be in [0, 0.5)";
     else if (lut.len != 256 * (Py_ssize_t)sizeof(double))
         bad = "lut: expected 256 float64 values";
+    else if (bend_cap < 1)
+        bad = "bend radius must be at least 1 px";
     const int64_t *rad = (const int64_t *)radii.buf;
     int64_t r_max = 1;
     for (Py_ssize_t i = 0; !bad && i < k; i++) { /* bounded: the work buffer grows with it */
@@ -470,7 +473,7 @@ static PyObject *refine_quads(PyObject *self, PyObject *args) {
             for (Py_ssize_t i = 0; i < k; i++) {
                 flag[i] = (uint8_t)refine_one(&im, c + 8 * i, rad[i], iterations, max_iterations, tol, count, end_gap, force, work);
                 if (flag[i] && bend && longest_side(c + 8 * i) >= BEND_MIN_SIDE)
-                    bend_one(&im, c + 8 * i, rad[i], force, work);
+                    bend_one(&im, c + 8 * i, rad[i] < bend_cap ? rad[i] : (int64_t)bend_cap, force, work);
             }
             Py_END_ALLOW_THREADS
         }
@@ -485,7 +488,8 @@ static PyObject *refine_quads(PyObject *self, PyObject *args) {
 
 static PyMethodDef methods[] = {
     {"refine_quads", refine_quads, METH_VARARGS,
-     "refine_quads(gray, height, width, quads, radii, iterations, count, end_gap, lut, bend, force[, max_iterations, tol])"
+     "refine_quads(gray, height, width, quads, radii, iterations, count, end_gap, lut, bend, force[, max_iterations, tol,"
+     " bend_radius])"
      " -> (corners, ok)\n\n"
      "Stage 8 for K quads; see visloc.markers.refine.refine_quads."},
     {NULL, NULL, 0, NULL},

@@ -176,6 +176,12 @@ class DetectorParams:
         last pass, meet (lens distortion bends straight sides; a side stays a line unless its
         curvature is significant). On camera-like 640 x 480 renders with barrel distortion
         (k1 = -0.15, no noise) the corner RMS falls from 0.35 to 0.03 px.
+    bend_radius : int
+        Stage 8b's profile half-width at most, px (1-50; the quad's own radius where smaller).
+        It starts from refined sides, so a narrow window suffices; the samples farther out
+        only add noise, and clipped to the black-white span they move the edges outward
+        where the white side is the noisier (dark frames). ``python bench/refine_window.py``
+        compares widths on camera-like frames.
     border_bits : int
         Width of the markers' black border in cells, 1 to 3 (OpenCV's ``markerBorderBits``).
     inverted : bool or "both"
@@ -235,6 +241,7 @@ class DetectorParams:
     refine_max_radius: int = 5
     refine_profiles: int = 24
     bend: bool = True
+    bend_radius: int = 3
     response: str | float = "srgb"
     border_bits: int = 1
     inverted: bool | str = False
@@ -818,7 +825,7 @@ class MarkerDetector:
             corners, refined = refine_quads(gray, quads, radius=radii, iterations=p.refine_iterations,
                                             max_iterations=p.refine_max_iterations, tolerance=p.refine_tolerance,
                                             count=p.refine_profiles, response=self._luts[inverted],
-                                            bend=p.bend, native=p.native)  # stages 8 and 8b
+                                            bend=p.bend, bend_radius=p.bend_radius, native=p.native)  # 8, 8b
         cells, (valid, bits, margin, contrast, thr) = read_cells(  # stage 9, batched
             gray, corners, n_cells, per_side=4, border_error_rate=p.border_error_rate, border=bb,
             min_quiet_zone=p.min_quiet_zone, native=p.native)
@@ -881,7 +888,7 @@ def _check_params(p: DetectorParams) -> None:
         if not isinstance(getattr(p, key), (bool, np.bool_)):
             raise TypeError(f"{key} must be True or False, got {getattr(p, key)!r}")
     ints = {"erode": (0, 5), "refine_max_iterations": (1, 100), "refine_iterations": (1, p.refine_max_iterations),
-            "refine_max_radius": (1, 50), "refine_profiles": (2, 1000), "border_bits": (1, 3),
+            "refine_max_radius": (1, 50), "bend_radius": (1, 50), "refine_profiles": (2, 1000), "border_bits": (1, 3),
             "min_pass_size": (0, None), "base_height": (16, None)}
     for key, (lo, hi) in ints.items():
         v = getattr(p, key)

@@ -242,6 +242,7 @@ def refine_quads(
     count: int = 24,
     response: str | float | NDArray = "srgb",
     bend: bool = False,
+    bend_radius: int | None = None,
     levels: str = "auto",
     native: bool | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
@@ -281,6 +282,9 @@ def refine_quads(
         Stage 8b on the refined quads with a side of 40 px or more: the corners where the
         sides, fitted as quadratic curves, meet (:func:`bend_corners`, compiled alongside
         stage 8).
+    bend_radius : int or None
+        Stage 8b's profile half-width at most, px (1-64; a quad's ``radius`` where smaller);
+        None: ``radius``. The detector uses 3 (:class:`~visloc.markers.DetectorParams`).
     levels : {"auto", "side"}
         The black and white levels of a quad with a side of 40 px or more: ``"auto"`` each
         side's own where the light varies significantly along or across it, else the quad's;
@@ -327,11 +331,15 @@ def refine_quads(
         raise ValueError(f"max_iterations must be at most 100 and tolerance >= 0, got {max_iterations} and {tolerance}")
     if levels not in ("auto", "side"):
         raise ValueError(f"levels must be 'auto' or 'side', got {levels!r}")
+    if bend_radius is not None and (isinstance(bend_radius, bool) or int(bend_radius) != bend_radius
+                                    or not 1 <= bend_radius <= _MAX_RADIUS):
+        raise ValueError(f"bend_radius must be None or 1 to {_MAX_RADIUS} px, got {bend_radius!r}")
+    cap = _MAX_RADIUS if bend_radius is None else int(bend_radius)
     if use_compiled(native, _refine, "visloc.markers._refine"):
         g = np.ascontiguousarray(gray)
         raw, raw_ok = _refine.refine_quads(g, g.shape[0], g.shape[1], np.ascontiguousarray(q0),
                                            np.ascontiguousarray(r, np.int64), int(iterations), int(count), _END_GAP,
-                                           lut, bool(bend), levels == "side", most, float(tolerance))
+                                           lut, bool(bend), levels == "side", most, float(tolerance), cap)
         return np.frombuffer(raw, np.float64).reshape(k, 4, 2).copy(), np.frombuffer(raw_ok, np.uint8).astype(bool)
     light = _to_light(gray, response)
     ok_all = np.ones(k, bool)
@@ -357,7 +365,7 @@ def refine_quads(
     long_side = _longest_sides(q) >= _BEND_MIN_SIDE
     if bend and (ok_all & long_side).any():  # short sides bend by a small fraction of a pixel
         pick = ok_all & long_side
-        q[pick] = bend_corners(gray, q[pick], radius=r[pick], response=response, levels=levels)
+        q[pick] = bend_corners(gray, q[pick], radius=np.minimum(r[pick], cap), response=response, levels=levels)
     return q, ok_all
 
 

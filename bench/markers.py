@@ -151,23 +151,29 @@ def run_rendered(size, methods, rounds, dict_name, sets, seed0, camera=True):
                 times[m].append(spent)
                 if r == 0:
                     outputs[m][k] = out
+    matched = {m: [match(outputs[m][k], [t for t in sc.markers if t.visible]) for k, (_, sc) in enumerate(scenes)]
+               for m in methods}
+    # the markers every method of the table found, per frame: corner errors on the same markers
+    common = [set.intersection(*({gt.id for _, gt in matched[m][k][0]} for m in methods)) for k in range(len(scenes))]
     stats = {}
     for m in methods:
         per_set = {}
         for name in sets:
             idx = [k for k, (s, _) in enumerate(scenes) if s == name]
             n_truth = tp = fp = flips = 0
-            cerr, rot, trans = [], [], []
+            cerr, rot, trans, shared = [], [], [], []
             for k in idx:
                 sc = scenes[k][1]
                 truth = [t for t in sc.markers if t.visible]
                 n_truth += len(truth)
-                pairs, f = match(outputs[m][k], truth)
+                pairs, f = matched[m][k]
                 fp += f
                 tp += len(pairs)
                 camera = Camera(sc.K, sc.dist)
                 for c, gt in pairs:
                     cerr.extend(corner_alignment(c, gt.corners))
+                    if gt.id in common[k]:
+                        shared.extend(corner_alignment(c, gt.corners))
                     pose_corners = c
                     meth = m
                     if m == "opencv":  # IPPE_SQUARE on SUBPIX corners is scored under opencv_subpix
@@ -186,6 +192,9 @@ def run_rendered(size, methods, rounds, dict_name, sets, seed0, camera=True):
                 "false_positives_per_frame": fp / len(idx),
                 "corner_rms_px": float(np.sqrt(np.mean(np.square(cerr)))) if cerr else None,
                 "corner_median_px": float(np.median(cerr)) if cerr else None,
+                "common_markers": len(shared) // 4,
+                "common_corner_rms_px": float(np.sqrt(np.mean(np.square(shared)))) if shared else None,
+                "common_corner_median_px": float(np.median(shared)) if shared else None,
                 "rot_err_median_deg": float(np.median(rot)) if rot else None,
                 "trans_err_median_pct": float(100 * np.median(trans)) if trans else None,
                 "flip_rate": flips / len(rot) if rot else None,
@@ -303,15 +312,20 @@ def _plain(o):
 def markdown(result) -> str:
     lines = []
     for key, res in result["rendered"].items():
-        lines.append(f"\n**{key}** (median ms per frame over all sets; ratio to OpenCV default)\n")
+        lines.append(f"\n**{key}** (median ms per frame over all sets; ratio to OpenCV default; `common`: the "
+                     "corners of the markers every method in the table found, RMS / median px)\n")
         base = res["opencv"]["ms_median"]
-        lines.append("| method | ms/frame | ratio | set | recall | FP/frame | corner RMS px | corner median px | rot err median ° | trans err median % | flips |")
-        lines.append("|---|---|---|---|---|---|---|---|---|---|---|")
+        lines.append("| method | ms/frame | ratio | set | recall | FP/frame | corner RMS px | corner median px | common "
+                     "(markers: RMS / median px) | rot err median ° | trans err median % | flips |")
+        lines.append("|---|---|---|---|---|---|---|---|---|---|---|---|")
         for m, st in res.items():
             for k, (name, s) in enumerate(st["sets"].items()):
                 head = (m, fmt(st["ms_median"], 2), fmt(st["ms_median"] / base, 2)) if k == 0 else ("", "", "")
+                shared = (f"{s['common_markers']}: {fmt(s['common_corner_rms_px'])} / {fmt(s['common_corner_median_px'])}"
+                          if s["common_markers"] else "–")
                 lines.append("| " + " | ".join([*head, name, fmt(s["recall"]), fmt(s["false_positives_per_frame"], 2),
-                                                 fmt(s["corner_rms_px"]), fmt(s["corner_median_px"]), fmt(s["rot_err_median_deg"], 2),
+                                                 fmt(s["corner_rms_px"]), fmt(s["corner_median_px"]), shared,
+                                                 fmt(s["rot_err_median_deg"], 2),
                                                  fmt(s["trans_err_median_pct"], 2), fmt(s["flip_rate"], 3)]) + " |")
     if result.get("boards"):
         lines.append("\n**AprilGrid-style boards**, 640x480 DICT_APRILTAG_36h11 (tags touching the grid's corner "

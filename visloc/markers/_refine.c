@@ -18,8 +18,9 @@
  * the two agree to about 0.01 px.
  *
  * refine_quads(gray, height, width, quads, radii, iterations, count, end_gap, lut, bend, force[, max_iterations,
- *              tol, bend_radius]) -> (corners, ok)
- *     (bend: stage 8b, bend_one, on every quad refined, its profiles at most bend_radius px wide)
+ *              tol, bend_radius, noisy_bend_radius]) -> (corners, ok)
+ *     (bend: stage 8b, bend_one, on every quad refined, its profiles at most bend_radius px to either side,
+ *     noisy_bend_radius on a quad whose end samples' noise is NOISY of its contrast or more)
  *     gray: uint8 (H, W) bytes; quads: float64 (K, 4, 2); radii: int64 (K,); lut: float64 (256,),
  *     increasing; returns float64 (K, 4, 2) corners (the input where refinement failed) and
  *     uint8 (K,) flags, as bytes.
@@ -254,7 +255,9 @@ static double longest_side(const double q[8]) {
     }
     return best;
 }
-static void bend_one(const image *im, double q[8], int64_t r, int force, double *work) {
+#define NOISY 0.1 /* refine.py's _NOISY */
+
+static void bend_one(const image *im, double q[8], int64_t r, int64_t narrow, int force, double *work) {
     const int64_t width = 2 * r + 1, n = BEND_COUNT, n4 = 4 * BEND_COUNT;
     double *p_in = work, *p_out = work + n4, *sorted = work + 2 * n4, *off = work + 3 * n4, *w = work + 4 * n4;
     double *prof = work + 5 * n4;
@@ -280,6 +283,23 @@ static void bend_one(const image *im, double q[8], int64_t r, int force, double 
     memcpy(sorted, p_out, (size_t)n4 * sizeof(double));
     double hi_q = select_rank(sorted, n4, 2 * n);
     double sd_lo = noise_of(p_in, n, sorted), sd_hi = noise_of(p_out, n, sorted);
+    int64_t c0 = 0, wd = width, rr = r; /* the samples of each profile used: wd from c0, half-width rr */
+    if (narrow > 0 && r > narrow && (sd_lo > sd_hi ? sd_lo : sd_hi) >= NOISY * (hi_q - lo_q)) {
+        /* noise a large part of the contrast: the central 2 narrow + 1 samples (refine.py's _narrowed) */
+        c0 = r - narrow;
+        wd = 2 * narrow + 1;
+        rr = narrow;
+        for (int64_t j = 0; j < n4; j++) {
+            p_in[j] = prof[j * width + c0];
+            p_out[j] = prof[j * width + c0 + wd - 1];
+        }
+        memcpy(sorted, p_in, (size_t)n4 * sizeof(double));
+        lo_q = select_rank(sorted, n4, 2 * n);
+        memcpy(sorted, p_out, (size_t)n4 * sizeof(double));
+        hi_q = select_rank(sorted, n4, 2 * n);
+        sd_lo = noise_of(p_in, n, sorted);
+        sd_hi = noise_of(p_out, n, sorted);
+    }
     double cf[4][3], out[8];
     for (int s = 0; s < 4; s++) {
         double *lo = levels, *hi = levels + n; /* levels as refine_one reads those of large quads */
@@ -288,8 +308,8 @@ static void bend_one(const image *im, double q[8], int64_t r, int force, double 
         for (int64_t m = 0; m < n; m++) {
             int64_t j = s * n + m;
             double span = hi[m] - lo[m] > 1e-6 ? hi[m] - lo[m] : 1e-6;
-            off[j] = step_offset(prof + j * width, width, lo[m], span, r);
-            w[j] = (p_out[j] - p_in[j]) > 0.5 * (hi[m] - lo[m]) && fabs(off[j]) < (double)r;
+            off[j] = step_offset(prof + j * width + c0, wd, lo[m], span, rr);
+            w[j] = (p_out[j] - p_in[j]) > 0.5 * (hi[m] - lo[m]) && fabs(off[j]) < (double)rr;
         }
         double *o = off + s * n, *ws = w + s * n;
         if (!fit_curve(t, o, ws, n, cf[s])) return;
@@ -308,7 +328,7 @@ static void bend_one(const image *im, double q[8], int64_t r, int force, double 
     }
     if (!curved_corners(q, (const double(*)[2])normal, (const double(*)[3])cf, out)) return;
     for (int c = 0; c < 8; c++)
-        if (!(fabs(out[c] - q[c]) < 1.0 + (double)r)) return; /* NaN too */
+        if (!(fabs(out[c] - q[c]) < 1.0 + (double)rr)) return; /* NaN too */
     memcpy(q, out, sizeof(out));
 }
 
@@ -427,8 +447,9 @@ static PyObject *refine_quads(PyObject *self, PyObject *args) {
     int iterations, bend, force, max_iterations = 0;
     double end_gap, tol = 0.0;
     Py_ssize_t bend_cap = 64; /* stage 8b's profile half-width at most (the quad's radius where smaller) */
-    if (!PyArg_ParseTuple(args, "y*nny*y*indy*pp|idn", &gray, &h, &w, &quads, &radii, &iterations, &count, &end_gap,
-                          &lut, &bend, &force, &max_iterations, &tol, &bend_cap))
+    Py_ssize_t narrow = 0;    /* and on noisy quads (0: never narrower) */
+    if (!PyArg_ParseTuple(args, "y*nny*y*indy*pp|idnn", &gray, &h, &w, &quads, &radii, &iterations, &count, &end_gap,
+                          &lut, &bend, &force, &max_iterations, &tol, &bend_cap, &narrow))
         return NULL;
     if (max_iterations < iterations) max_iterations = iterations; /* 0 (not given): exactly `iterations` */
     Py_ssize_t k = quads.len / (8 * (Py_ssize_t)sizeof(double));
@@ -445,8 +466,8 @@ static PyObject *refine_quads(PyObject *self, PyObject *args) {
         bad = "end_gap must be in [0, 0.5)";
     else if (lut.len != 256 * (Py_ssize_t)sizeof(double))
         bad = "lut: expected 256 float64 values";
-    else if (bend_cap < 1)
-        bad = "bend radius must be at least 1 px";
+    else if (bend_cap < 1 || narrow < 0)
+        bad = "bend radius must be at least 1 px (the noisy quads' 0 or more)";
     const int64_t *rad = (const int64_t *)radii.buf;
     int64_t r_max = 1;
     for (Py_ssize_t i = 0; !bad && i < k; i++) { /* bounded: the work buffer grows with it */
@@ -473,7 +494,8 @@ static PyObject *refine_quads(PyObject *self, PyObject *args) {
             for (Py_ssize_t i = 0; i < k; i++) {
                 flag[i] = (uint8_t)refine_one(&im, c + 8 * i, rad[i], iterations, max_iterations, tol, count, end_gap, force, work);
                 if (flag[i] && bend && longest_side(c + 8 * i) >= BEND_MIN_SIDE)
-                    bend_one(&im, c + 8 * i, rad[i] < bend_cap ? rad[i] : (int64_t)bend_cap, force, work);
+                    bend_one(&im, c + 8 * i, rad[i] < bend_cap ? rad[i] : (int64_t)bend_cap, (int64_t)narrow, force,
+                             work);
             }
             Py_END_ALLOW_THREADS
         }
@@ -489,7 +511,7 @@ static PyObject *refine_quads(PyObject *self, PyObject *args) {
 static PyMethodDef methods[] = {
     {"refine_quads", refine_quads, METH_VARARGS,
      "refine_quads(gray, height, width, quads, radii, iterations, count, end_gap, lut, bend, force[, max_iterations, tol,"
-     " bend_radius])"
+     " bend_radius, noisy_bend_radius])"
      " -> (corners, ok)\n\n"
      "Stage 8 for K quads; see visloc.markers.refine.refine_quads."},
     {NULL, NULL, 0, NULL},

@@ -182,6 +182,11 @@ class DetectorParams:
         only add noise, and clipped to the black-white span they move the edges outward
         where the white side is the noisier (dark frames). ``python bench/refine_window.py``
         compares widths on camera-like frames.
+    noisy_bend_radius : int or None
+        Stage 8b's half-width on a noisy marker (noise a tenth of the contrast or more: dark
+        frames; :func:`visloc.markers.refine.refine_quads`), px (1-50), where smaller than the
+        above; None: no narrowing. Without noise a narrow window's loss of a blurred edge's
+        tails (a bias) is all there is; with much noise the noise it leaves out wins.
     border_bits : int
         Width of the markers' black border in cells, 1 to 3 (OpenCV's ``markerBorderBits``).
     inverted : bool or "both"
@@ -242,6 +247,7 @@ class DetectorParams:
     refine_profiles: int = 24
     bend: bool = True
     bend_radius: int = 3
+    noisy_bend_radius: int | None = 2
     response: str | float = "srgb"
     border_bits: int = 1
     inverted: bool | str = False
@@ -825,7 +831,8 @@ class MarkerDetector:
             corners, refined = refine_quads(gray, quads, radius=radii, iterations=p.refine_iterations,
                                             max_iterations=p.refine_max_iterations, tolerance=p.refine_tolerance,
                                             count=p.refine_profiles, response=self._luts[inverted],
-                                            bend=p.bend, bend_radius=p.bend_radius, native=p.native)  # 8, 8b
+                                            bend=p.bend, bend_radius=p.bend_radius,
+                                            noisy_bend_radius=p.noisy_bend_radius, native=p.native)  # 8, 8b
         cells, (valid, bits, margin, contrast, thr) = read_cells(  # stage 9, batched
             gray, corners, n_cells, per_side=4, border_error_rate=p.border_error_rate, border=bb,
             min_quiet_zone=p.min_quiet_zone, native=p.native)
@@ -895,9 +902,10 @@ def _check_params(p: DetectorParams) -> None:
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo or (hi is not None and v > hi):
             raise ValueError(f"{key} must be an integer from {lo}" + (f" to {hi}" if hi is not None else " up")
                              + f", got {v!r}")
-    if p.refine_radius is not None and (isinstance(p.refine_radius, bool) or not isinstance(
-            p.refine_radius, (int, np.integer)) or not 1 <= p.refine_radius <= 50):
-        raise ValueError(f"refine_radius must be None or an integer from 1 to 50, got {p.refine_radius!r}")
+    for key in ("refine_radius", "noisy_bend_radius"):
+        v = getattr(p, key)
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 1 <= v <= 50):
+            raise ValueError(f"{key} must be None or an integer from 1 to 50, got {v!r}")
     # real fields: (least, largest, whether the largest is allowed); None: no bound
     reals = {"refine_tolerance": (0.0, None, True), "small_side": (0.0, None, True), "dark_mean": (0.0, None, True),
              "blur_sigma": (0.0, 10.0, True), "offset": (-255.0, 255.0, True), "corner_padding": (0.0, 0.5, False),

@@ -47,6 +47,11 @@ _END_GAP = 0.15  # fraction of each side left out at both ends (sample_edge_prof
 _MAX_RADIUS = 64
 _LEVELS = np.arange(256, dtype=np.float64)
 _BEND_MIN_SIDE = 40.0  # px: markers with shorter sides keep them straight (as _refine.c)
+#: a quad is noisy, and stage 8b then reads only the central 2 noisy_bend_radius + 1 samples of each
+#: profile, when the noise of its innermost or outermost samples (as _side_levels measures it) is
+#: at least this fraction of its contrast (as _refine.c's NOISY): on camera-like 640 x 480 frames
+#: 0.18-0.35 on dark ones (10th-90th percentile), under 0.05 on hard ones, 0 without noise
+_NOISY = 0.1
 _LEVEL_Z = 3.0  # standard errors for a side's own levels (_side_levels, as _refine.c)
 #: passes beyond ``iterations`` go on only while every pass shrank a quad's largest corner
 #: move by this factor (one that did not, or failed, is not taken): blur wider than the
@@ -243,6 +248,7 @@ def refine_quads(
     response: str | float | NDArray = "srgb",
     bend: bool = False,
     bend_radius: int | None = None,
+    noisy_bend_radius: int | None = None,
     levels: str = "auto",
     native: bool | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
@@ -285,6 +291,13 @@ def refine_quads(
     bend_radius : int or None
         Stage 8b's profile half-width at most, px (1-64; a quad's ``radius`` where smaller);
         None: ``radius``. The detector uses 3 (:class:`~visloc.markers.DetectorParams`).
+    noisy_bend_radius : int or None
+        Stage 8b's half-width on a noisy quad, px (1-64, where smaller than the above): the
+        noise of its innermost or outermost samples (1.4826 / sqrt 2 times the median
+        difference of neighbouring profiles') is a tenth of its contrast or more (dark frames;
+        under 0.05 on the bench's hard camera-like frames). A narrower window loses the tails
+        of a blurred edge (its offsets shrink: a bias) but sums less noise, which wins where
+        the noise is large. None: no narrowing. The detector uses 2.
     levels : {"auto", "side"}
         The black and white levels of a quad with a side of 40 px or more: ``"auto"`` each
         side's own where the light varies significantly along or across it, else the quad's;
@@ -335,11 +348,15 @@ def refine_quads(
                                     or not 1 <= bend_radius <= _MAX_RADIUS):
         raise ValueError(f"bend_radius must be None or 1 to {_MAX_RADIUS} px, got {bend_radius!r}")
     cap = _MAX_RADIUS if bend_radius is None else int(bend_radius)
+    if noisy_bend_radius is not None and (isinstance(noisy_bend_radius, bool) or int(noisy_bend_radius) != noisy_bend_radius
+                                          or not 1 <= noisy_bend_radius <= _MAX_RADIUS):
+        raise ValueError(f"noisy_bend_radius must be None or 1 to {_MAX_RADIUS} px, got {noisy_bend_radius!r}")
+    narrow = 0 if noisy_bend_radius is None else int(noisy_bend_radius)
     if use_compiled(native, _refine, "visloc.markers._refine"):
         g = np.ascontiguousarray(gray)
         raw, raw_ok = _refine.refine_quads(g, g.shape[0], g.shape[1], np.ascontiguousarray(q0),
                                            np.ascontiguousarray(r, np.int64), int(iterations), int(count), _END_GAP,
-                                           lut, bool(bend), levels == "side", most, float(tolerance), cap)
+                                           lut, bool(bend), levels == "side", most, float(tolerance), cap, narrow)
         return np.frombuffer(raw, np.float64).reshape(k, 4, 2).copy(), np.frombuffer(raw_ok, np.uint8).astype(bool)
     light = _to_light(gray, response)
     ok_all = np.ones(k, bool)
@@ -365,8 +382,36 @@ def refine_quads(
     long_side = _longest_sides(q) >= _BEND_MIN_SIDE
     if bend and (ok_all & long_side).any():  # short sides bend by a small fraction of a pixel
         pick = ok_all & long_side
-        q[pick] = bend_corners(gray, q[pick], radius=np.minimum(r[pick], cap), response=response, levels=levels)
+        radius = _narrowed(gray, q[pick], np.minimum(r[pick], cap), narrow, response)
+        q[pick] = bend_corners(gray, q[pick], radius=radius, response=response, levels=levels)
     return q, ok_all
+
+
+def _narrowed(gray: NDArray[np.uint8], q: NDArray, r: NDArray, narrow: int, response: str | float | NDArray,
+              count: int = 40, end_gap: float = 0.08) -> NDArray:
+    """Stage 8b's half-widths (K,) for quads (K, 4, 2) read at half-widths ``r``: ``narrow``
+    where it is smaller and the quad is noisy (:data:`_NOISY`: the noise of its innermost or
+    outermost samples, 1.4826 / sqrt 2 times the upper-middle median of neighbouring profiles'
+    differences along each side, over its contrast, the difference of those samples'
+    upper-middle medians), as ``_refine.c``'s bend_one."""
+    out = np.array(r, np.int64)
+    wider = np.flatnonzero(out > narrow) if narrow > 0 else np.zeros(0, np.int64)
+    if not len(wider):
+        return out
+    light = _to_light(gray, response)
+    mid = 2 * count
+    for rv in np.unique(out[wider]).tolist():
+        idx = wider[out[wider] == rv]
+        k = len(idx)
+        p = sample_edge_profiles(light, q[idx], rv, count=count, end_gap=end_gap)[2]  # (k, 4, count, 2 rv + 1)
+        ends = (p[..., 0], p[..., -1])
+        lo, hi = (np.partition(e.reshape(k, -1), mid, axis=1)[:, mid] for e in ends)
+        steps = [np.abs(np.diff(e, axis=-1)).reshape(k, -1) for e in ends]
+        half = steps[0].shape[1] // 2
+        sd = [1.4826 / np.sqrt(2.0) * np.partition(st, half, axis=1)[:, half] for st in steps]
+        noisy = np.maximum(sd[0], sd[1]) >= _NOISY * (hi - lo)
+        out[idx[noisy]] = narrow
+    return out
 
 
 def _refine_pass(light: NDArray, q: NDArray, r: NDArray, count: int, lut: NDArray, drop_outliers: bool,

@@ -102,6 +102,8 @@ def task_overhead(work: Path, tasks: int = 30) -> dict:
 
 def _one_worker(overhead: float) -> str:
     """The one-worker run against the serial loop, in words that read right either way."""
+    if abs(overhead) < 0.0005:
+        return "one worker took as long as the serial loop, Dask's start-up included"
     if overhead >= 0:
         return f"one worker costs {fmt(100 * overhead, 1)} % over the serial loop (Dask's start-up included)"
     return (f"one worker took {fmt(-100 * overhead, 1)} % less time than the serial loop, Dask's start-up included "

@@ -171,9 +171,10 @@ def run_rendered(size, methods, rounds, dict_name, sets, seed0, camera=True):
                 tp += len(pairs)
                 camera = Camera(sc.K, sc.dist)
                 for c, gt in pairs:
-                    cerr.extend(corner_alignment(c, gt.corners))
+                    err = corner_alignment(c, gt.corners)
+                    cerr.extend(err)
                     if gt.id in common[k]:
-                        shared.extend(corner_alignment(c, gt.corners))
+                        shared.extend(err)
                     pose_corners = c
                     meth = m
                     if m == "opencv":  # IPPE_SQUARE on SUBPIX corners is scored under opencv_subpix

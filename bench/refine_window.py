@@ -47,17 +47,19 @@ def run(n: int, seed: int = 300) -> dict:
             scenes = [random_scene(np.random.default_rng([seed, size[0], i, len(name)]), size=size, difficulty=name,
                                    camera=True, dictionary=dictionary) for i in range(n)]
             row = {"size": list(size), "dictionary": dictionary, "set": name, "by_radius": {}}
-            for r, det in detectors.items():
+            for column, det in detectors.items():
                 errs, found, total = [], 0, 0
                 for sc in scenes:
                     got = {d.id: d.corners for d in det.detect(sc.image)}
                     for m in sc.markers:
+                        if not m.visible:  # as the markers bench: only markers wholly in view count
+                            continue
                         total += 1
                         if m.id in got:
                             found += 1
                             errs.extend(np.linalg.norm(got[m.id] - m.corners, axis=1).tolist())
                 e = np.array(errs)
-                row["by_radius"][r] = {"recall": found / max(total, 1), "markers": total,
+                row["by_radius"][column] = {"recall": found / max(total, 1), "markers": total,
                                             "median_px": float(np.median(e)) if len(e) else None,
                                             "rms_px": float(np.sqrt(np.mean(e**2))) if len(e) else None}
             rows.append(row)
@@ -67,15 +69,15 @@ def run(n: int, seed: int = 300) -> dict:
 
 def markdown(result: dict) -> str:
     radii = result["radii"]
-    head = " | ".join(f"r = {r}: recall, median, RMS px" for r in radii)
+    head = " | ".join(f"r = {column}: recall, median, RMS px" for column in radii)
     title = (f"**Stage 8b's profile half-width** ({result['scenes_per_set']} camera-like scenes per set, seed "
              f"{result['seed']}, apart from the markers bench's; corner error against the truth; r = 5 is the width "
              "before the cap)")
     lines = [title, "", f"| set | {head} |", "|---|" + "---|" * len(radii)]
     for row in result["rows"]:
         cells = []
-        for r in radii:
-            v = row["by_radius"][r]
+        for column in radii:
+            v = row["by_radius"][column]
             cells.append(f"{v['recall']:.3f}, {fmt(v['median_px'])}, {fmt(v['rms_px'])}")
         name = f"{row['size'][0]}x{row['size'][1]} {row['dictionary']} {row['set']}"
         lines.append(f"| {name} | " + " | ".join(cells) + " |")

@@ -278,10 +278,7 @@ static void bend_one(const image *im, double q[8], int64_t r, int64_t narrow, in
             p_out[s * n + m] = pr[width - 1];
         }
     }
-    memcpy(sorted, p_in, (size_t)n4 * sizeof(double));
-    double lo_q = select_rank(sorted, n4, 2 * n);
-    memcpy(sorted, p_out, (size_t)n4 * sizeof(double));
-    double hi_q = select_rank(sorted, n4, 2 * n);
+    double lo_q = median_of(p_in, n4, sorted), hi_q = median_of(p_out, n4, sorted);
     double sd_lo = noise_of(p_in, n, sorted), sd_hi = noise_of(p_out, n, sorted);
     int64_t c0 = 0, wd = width, rr = r; /* the samples of each profile used: wd from c0, half-width rr */
     if (narrow > 0 && r > narrow && (sd_lo > sd_hi ? sd_lo : sd_hi) >= NOISY * (hi_q - lo_q)) {
@@ -293,10 +290,8 @@ static void bend_one(const image *im, double q[8], int64_t r, int64_t narrow, in
             p_in[j] = prof[j * width + c0];
             p_out[j] = prof[j * width + c0 + wd - 1];
         }
-        memcpy(sorted, p_in, (size_t)n4 * sizeof(double));
-        lo_q = select_rank(sorted, n4, 2 * n);
-        memcpy(sorted, p_out, (size_t)n4 * sizeof(double));
-        hi_q = select_rank(sorted, n4, 2 * n);
+        lo_q = median_of(p_in, n4, sorted);
+        hi_q = median_of(p_out, n4, sorted);
         sd_lo = noise_of(p_in, n, sorted);
         sd_hi = noise_of(p_out, n, sorted);
     }
@@ -364,10 +359,7 @@ static int refine_one(const image *im, double q[8], int64_t r, int iterations, i
                 ey[s * count + m] = by;
             }
         }
-        memcpy(sorted, p_in, (size_t)n4 * sizeof(double));
-        double lo = select_rank(sorted, n4, 2 * count);
-        memcpy(sorted, p_out, (size_t)n4 * sizeof(double));
-        double hi = select_rank(sorted, n4, 2 * count);
+        double lo = median_of(p_in, n4, sorted), hi = median_of(p_out, n4, sorted);
         if (!(to_grey(im->lut, hi) - to_grey(im->lut, lo) >= 4.0)) goto failed; /* no contrast (grey levels) */
         int long_sides = longest_side(cur) >= BEND_MIN_SIDE;
         double sd_lo = long_sides ? noise_of(p_in, count, sorted) : 0.0;

@@ -206,6 +206,15 @@ def _longest_sides(q: NDArray) -> NDArray:
     return np.sqrt(((q[:, _NEXT] - q) ** 2).sum(axis=-1)).max(axis=1)
 
 
+def _noise(ends: NDArray) -> NDArray:
+    """Each quad's noise (K,) in its end samples ``ends`` (K, 4, M): neighbouring profiles'
+    samples differ by it (times sqrt 2), not by a smooth change of the light, so 1.4826 /
+    sqrt 2 times the median (upper middle) of those differences (``_refine.c``'s noise_of)."""
+    steps = np.abs(np.diff(ends, axis=-1)).reshape(len(ends), -1)
+    half = steps.shape[1] // 2
+    return 1.4826 / np.sqrt(2.0) * np.partition(steps, half, axis=1)[:, half]
+
+
 def _side_levels(ends: NDArray, quad: NDArray, force: bool = False) -> NDArray:
     """Each side's level (black from the innermost samples, white from the outermost) at each
     of its M profiles (K, 4, M), from the end samples ``ends`` (K, 4, M) and the quad's level
@@ -215,15 +224,12 @@ def _side_levels(ends: NDArray, quad: NDArray, force: bool = False) -> NDArray:
     the light varies along the side), else the side's median where it differs significantly
     from the quad's level, else the quad's level (as ``_refine.c``); with ``force`` the line
     always."""
-    k, _, m = ends.shape
+    m = ends.shape[2]
     out = np.broadcast_to(quad[:, None, None], ends.shape).copy()
     h1, h2 = m // 2, m - m // 2
     if h1 < 2:
         return out
-    # the noise: neighbouring profiles' samples differ by it (times sqrt 2), not by a smooth change
-    steps = np.abs(np.diff(ends, axis=-1)).reshape(k, -1)
-    half = steps.shape[1] // 2
-    sd = 1.4826 / np.sqrt(2.0) * np.partition(steps, half, axis=1)[:, half]  # (K,)
+    sd = _noise(ends)  # (K,)
     m1 = np.partition(ends[..., :h1], h1 // 2, axis=-1)[..., h1 // 2]  # (K, 4)
     m2 = np.partition(ends[..., h1:], h2 // 2, axis=-1)[..., h2 // 2]
     side = np.partition(ends, m // 2, axis=-1)[..., m // 2]
@@ -344,14 +350,8 @@ def refine_quads(
         raise ValueError(f"max_iterations must be at most 100 and tolerance >= 0, got {max_iterations} and {tolerance}")
     if levels not in ("auto", "side"):
         raise ValueError(f"levels must be 'auto' or 'side', got {levels!r}")
-    if bend_radius is not None and (isinstance(bend_radius, bool) or int(bend_radius) != bend_radius
-                                    or not 1 <= bend_radius <= _MAX_RADIUS):
-        raise ValueError(f"bend_radius must be None or 1 to {_MAX_RADIUS} px, got {bend_radius!r}")
-    cap = _MAX_RADIUS if bend_radius is None else int(bend_radius)
-    if noisy_bend_radius is not None and (isinstance(noisy_bend_radius, bool) or int(noisy_bend_radius) != noisy_bend_radius
-                                          or not 1 <= noisy_bend_radius <= _MAX_RADIUS):
-        raise ValueError(f"noisy_bend_radius must be None or 1 to {_MAX_RADIUS} px, got {noisy_bend_radius!r}")
-    narrow = 0 if noisy_bend_radius is None else int(noisy_bend_radius)
+    cap = _optional_radius(bend_radius, "bend_radius") or _MAX_RADIUS
+    narrow = _optional_radius(noisy_bend_radius, "noisy_bend_radius")
     if use_compiled(native, _refine, "visloc.markers._refine"):
         g = np.ascontiguousarray(gray)
         raw, raw_ok = _refine.refine_quads(g, g.shape[0], g.shape[1], np.ascontiguousarray(q0),
@@ -387,6 +387,15 @@ def refine_quads(
     return q, ok_all
 
 
+def _optional_radius(value: int | None, name: str) -> int:
+    """``value`` as an int (0 for None), having checked it is None or a whole number of px in 1-64."""
+    if value is None:
+        return 0
+    if isinstance(value, bool) or int(value) != value or not 1 <= value <= _MAX_RADIUS:
+        raise ValueError(f"{name} must be None or 1 to {_MAX_RADIUS} px, got {value!r}")
+    return int(value)
+
+
 def _narrowed(gray: NDArray[np.uint8], q: NDArray, r: NDArray, narrow: int, response: str | float | NDArray,
               count: int = 40, end_gap: float = 0.08) -> NDArray:
     """Stage 8b's half-widths (K,) for quads (K, 4, 2) read at half-widths ``r``: ``narrow``
@@ -406,10 +415,7 @@ def _narrowed(gray: NDArray[np.uint8], q: NDArray, r: NDArray, narrow: int, resp
         p = sample_edge_profiles(light, q[idx], rv, count=count, end_gap=end_gap)[2]  # (k, 4, count, 2 rv + 1)
         ends = (p[..., 0], p[..., -1])
         lo, hi = (np.partition(e.reshape(k, -1), mid, axis=1)[:, mid] for e in ends)
-        steps = [np.abs(np.diff(e, axis=-1)).reshape(k, -1) for e in ends]
-        half = steps[0].shape[1] // 2
-        sd = [1.4826 / np.sqrt(2.0) * np.partition(st, half, axis=1)[:, half] for st in steps]
-        noisy = np.maximum(sd[0], sd[1]) >= _NOISY * (hi - lo)
+        noisy = np.maximum(_noise(ends[0]), _noise(ends[1])) >= _NOISY * (hi - lo)
         out[idx[noisy]] = narrow
     return out
 

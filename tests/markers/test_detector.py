@@ -435,3 +435,33 @@ def test_stage_3c_leaves_isolated_markers_alone(monkeypatch):
     calls = []
     monkeypatch.setattr(det, "_eroded", lambda *a: calls.append(a))
     assert det.detect(scene.image) and not calls
+
+
+@pytest.mark.parametrize("native", [None, False])
+def test_coarse_pass_quads_on_dark_frames_get_a_wide_refinement_first(native):
+    # Dark, noisy 1280 x 720 camera-like frames: these markers are found only by the coarse
+    # search passes, whose contours put one side of each quad 10-34 px off at one end. Stage 8
+    # (0.4 cell, at most 5 px) cannot reach that; the wide first refinement (0.4 cell uncapped)
+    # brings every corner within 2.5 px. Without it (coarse_scale=None) corners stay 16-30 px off.
+    scenes = [random_scene(np.random.default_rng([700, 1280, i, 4]), size=(1280, 720), difficulty="dark", camera=True)
+              for i in (8, 11)]
+    worst = {}
+    for coarse_scale in (3.0, None):
+        det = MarkerDetector("DICT_4X4_50", coarse_scale=coarse_scale, native=native)
+        errors = []
+        for sc in scenes:
+            truth = {m.id: m.corners for m in sc.markers if m.visible}
+            got = {d.id: d.corners for d in det.detect(sc.image) if d.id in truth}
+            assert len(got) == 4
+            errors += [float(np.linalg.norm(c - truth[i], axis=1).max()) for i, c in got.items()]
+        worst[coarse_scale] = max(errors)
+    assert worst[3.0] < 2.5
+    assert worst[None] > 10.0
+
+
+def test_coarse_refinement_settings_are_checked():
+    assert MarkerDetector("DICT_4X4_50").params.coarse_scale == 3.0
+    with pytest.raises(ValueError, match="coarse_scale"):
+        MarkerDetector("DICT_4X4_50", coarse_scale=0.5)
+    with pytest.raises(ValueError, match="coarse_iterations"):
+        MarkerDetector("DICT_4X4_50", coarse_iterations=0)

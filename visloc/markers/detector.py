@@ -171,6 +171,16 @@ class DetectorParams:
         each pass move a side only part of the way).
     refine_tolerance : float
         Largest corner move (px) of a converged stage 8 pass.
+    coarse_scale : float or None
+        Candidates from search passes this coarse or coarser (full-resolution px per pass
+        pixel) start stage 8 with a wide refinement: ``coarse_iterations`` passes with
+        profiles 0.4 cell wide (stage 8's own width without its ``refine_max_radius`` cap),
+        its corners taken where they moved more than stage 8's radius. A coarse pass's
+        contour on a noisy dark frame can put a side several pixels off at one end, beyond
+        stage 8's reach (on camera-like dark 1280 x 720 renders about one corner in twenty
+        was 7-30 px off). None: no wide refinement.
+    coarse_iterations : int
+        Passes of the wide refinement (3-6 did equally well on those renders, 8 worse).
     bend : bool
         Stage 8b on/off: the corners where the sides, fitted as quadratic curves in stage 8's
         last pass, meet (lens distortion bends straight sides; a side stays a line unless its
@@ -245,6 +255,8 @@ class DetectorParams:
     refine_tolerance: float = 0.05
     refine_max_radius: int = 5
     refine_profiles: int = 24
+    coarse_scale: float | None = 3.0
+    coarse_iterations: int = 4
     bend: bool = True
     bend_radius: int = 3
     noisy_bend_radius: int | None = 2
@@ -777,7 +789,8 @@ class MarkerDetector:
         if not cands.quads:
             return []
         quads = np.array(cands.quads)
-        cells, reads, made, areas = self._made(gray, quads, inverted)
+        coarse = None if self.params.coarse_scale is None else np.array(cands.scales) >= self.params.coarse_scale
+        cells, reads, made, areas = self._made(gray, quads, inverted, coarse=coarse)
         valid, bits = reads[:2]
         found: list[tuple[MarkerDetection, float]] = []
         for i, det in enumerate(made):
@@ -797,13 +810,15 @@ class MarkerDetector:
                     log["candidates"][j] = replace(c, stage="duplicate")
         return dets
 
-    def _made(self, gray: NDArray[np.uint8], quads: NDArray, inverted: bool, *, retry_fit: bool = True
+    def _made(self, gray: NDArray[np.uint8], quads: NDArray, inverted: bool, *, retry_fit: bool = True,
+              coarse: NDArray | None = None
               ) -> tuple[CellSample, list[NDArray], list[MarkerDetection | None], list[float]]:
         """Stages 8-10 (:meth:`_read`) on candidate quads (K, 4, 2), and what they make:
         ``(cells, reads, detections, areas)``, a :class:`MarkerDetection` per accepted
         candidate (corners from the marker's own top-left corner) and None per rejected one,
-        with each quad's area, px^2. ``retry_fit``: as :meth:`_read`."""
-        corners, refined, cells, reads, accept, confidence = self._read(gray, quads, inverted, retry_fit=retry_fit)
+        with each quad's area, px^2. ``retry_fit``, ``coarse``: as :meth:`_read`."""
+        corners, refined, cells, reads, accept, confidence = self._read(gray, quads, inverted, retry_fit=retry_fit,
+                                                                        coarse=coarse)
         ids, shift, hamming = reads[5:8]
         order = (_FOUR[None, :] + shift[:, None]) % 4  # all at once
         rolled = corners[np.arange(len(corners))[:, None], order]
@@ -813,14 +828,16 @@ class MarkerDetector:
                 for ok, mid, c, ham, mar, rot, con, ref, conf in rows]
         return cells, reads, made, np.abs(_areas(rolled)).tolist()
 
-    def _read(self, gray: NDArray[np.uint8], quads: NDArray, inverted: bool, *, retry_fit: bool = True) -> tuple:
+    def _read(self, gray: NDArray[np.uint8], quads: NDArray, inverted: bool, *, retry_fit: bool = True,
+              coarse: NDArray | None = None) -> tuple:
         """Stages 8-10 on candidate quads (K, 4, 2) in full-resolution pixels: edge
         refinement, cell reads (a second read where the first does not decode) and the
         dictionary match. Returns ``(corners, refined, cells, reads, accept, confidence)``:
         ``reads`` is (valid, bits, margin, contrast, threshold, ids, shift, hamming, matched),
         ``accept`` (K,) the candidates that decode and pass OpenCV's cell-area check.
         ``retry_fit`` False: no second read through ``quads`` themselves (they are
-        predictions, not stage-7 fits)."""
+        predictions, not stage-7 fits). ``coarse`` (K,) bool: the quads from coarse search
+        passes (``coarse_scale``), which start stage 8 with a wide refinement."""
         p = self.params
         bb = p.border_bits
         n_cells = self.dictionary.marker_size + 2 * bb
@@ -828,7 +845,8 @@ class MarkerDetector:
         if p.refine:  # stage 8, batched
             side = np.sqrt(np.abs(_areas(quads)))
             radii = p.refine_radius or np.clip(np.round(0.4 * side / n_cells), 1, p.refine_max_radius).astype(int)
-            corners, refined = refine_quads(gray, quads, radius=radii, iterations=p.refine_iterations,
+            start = quads if coarse is None else self._wide_start(gray, quads, radii, side / n_cells, coarse, inverted)
+            corners, refined = refine_quads(gray, start, radius=radii, iterations=p.refine_iterations,
                                             max_iterations=p.refine_max_iterations, tolerance=p.refine_tolerance,
                                             count=p.refine_profiles, response=self._luts[inverted],
                                             bend=p.bend, bend_radius=p.bend_radius,
@@ -848,6 +866,25 @@ class MarkerDetector:
             confidence[acc], clear = self._area_check(gray, corners[acc], thr[acc], ids[acc], shift[acc])
             accept[acc[~clear]] = False
         return corners, refined, cells, reads, accept, confidence
+
+    def _wide_start(self, gray: NDArray[np.uint8], quads: NDArray, radii: NDArray | int, cell: NDArray,
+                    coarse: NDArray, inverted: bool) -> NDArray:
+        """Stage 8's start for quads (K, 4, 2) with cells ``cell`` (K,) px: the coarse ones
+        (``coarse`` (K,) bool) whose 0.4-cell width exceeds stage 8's ``radii`` refined first
+        with that width (``coarse_iterations`` passes), taken where a corner moved more than
+        the quad's stage-8 radius (a quad within that reach is left to stage 8 alone)."""
+        p = self.params
+        radii = np.broadcast_to(radii, (len(quads),))
+        wide = np.clip(np.round(0.4 * cell), 1, 50).astype(int)
+        pick = np.flatnonzero(coarse & (wide > radii))
+        if not len(pick):
+            return quads
+        moved, ok = refine_quads(gray, quads[pick], radius=wide[pick], iterations=p.coarse_iterations,
+                                 count=p.refine_profiles, response=self._luts[inverted], native=p.native)
+        far = ok & (np.abs(moved - quads[pick]).max(axis=(1, 2)) > radii[pick])
+        start = quads.copy()
+        start[pick[far]] = moved[far]
+        return start
 
     def _second_reads(self, gray: NDArray[np.uint8], quads: NDArray, corners: NDArray, refined: NDArray,
                       cells: CellSample, reads: list[NDArray], *, retry_fit: bool = True) -> CellSample:
@@ -896,7 +933,8 @@ def _check_params(p: DetectorParams) -> None:
             raise TypeError(f"{key} must be True or False, got {getattr(p, key)!r}")
     ints = {"erode": (0, 5), "refine_max_iterations": (1, 100), "refine_iterations": (1, p.refine_max_iterations),
             "refine_max_radius": (1, 50), "bend_radius": (1, 50), "refine_profiles": (2, 1000), "border_bits": (1, 3),
-            "min_pass_size": (0, None), "base_height": (16, None)}
+            "min_pass_size": (0, None), "base_height": (16, None),
+            "coarse_iterations": (1, 100)}
     for key, (lo, hi) in ints.items():
         v = getattr(p, key)
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo or (hi is not None and v > hi):
@@ -911,10 +949,10 @@ def _check_params(p: DetectorParams) -> None:
              "blur_sigma": (0.0, 10.0, True), "offset": (-255.0, 255.0, True), "corner_padding": (0.0, 0.5, False),
              "border_error_rate": (0.0, 1.0, True), "min_quiet_zone": (0.0, 1.0, True),
              "cell_margin": (0.0, 0.5, False), "error_correction_rate": (0.0, 1.0, True),
-             "corner_sigma": (0.0, None, True), "bit_threshold": (0.0, 1.0, True)}
+             "corner_sigma": (0.0, None, True), "bit_threshold": (0.0, 1.0, True), "coarse_scale": (1.0, None, True)}
     for key, (lo, hi, closed) in reals.items():
         v = getattr(p, key)
-        if v is None and key in ("corner_sigma", "bit_threshold"):
+        if v is None and key in ("corner_sigma", "bit_threshold", "coarse_scale"):
             continue
         ok = not isinstance(v, bool) and isinstance(v, (int, float, np.integer, np.floating)) and math.isfinite(v)
         if not ok or v < lo or (hi is not None and (v > hi or (v == hi and not closed))):

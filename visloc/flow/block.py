@@ -358,16 +358,7 @@ def block_flow(
     if prior is not None and (np.shape(prior) != (2,) or not np.isfinite(np.asarray(prior, np.float64)).all()):
         raise ValueError(f"prior must be two finite numbers (dx, dy) in px, got {prior!r}")
     h, w = a.shape
-    bsz = default_block(a.shape) if block is None else int(block)
-    stp = bsz if step is None else int(step)
-    if not 8 <= bsz <= min(h, w):
-        raise ValueError(f"block must be in [8, {min(h, w)}] px for {w} x {h} frames, got {bsz}")
-    if stp < 1 or bsz % stp:
-        raise ValueError(f"step must divide block ({bsz}), got {stp}")
-    srch = max(3, bsz // 8) if search is None else int(search)
-    gsrch = max(srch, min(h, w) // 4) if global_search is None else int(global_search)
-    if srch < 1 or gsrch < 1:
-        raise ValueError(f"search ranges must be >= 1, got search={srch}, global_search={gsrch}")
+    bsz, stp, srch, gsrch = _sizes(a.shape, block, step, search, global_search)
     rows, cols = (h // stp) * stp, (w // stp) * stp
     k = bsz // stp
     grad = mode == "gradient"
@@ -421,9 +412,34 @@ def block_flow(
         q3 = q3 - q3.mean(axis=2, keepdims=True)
     off, ratio = _best_shifts(cost, best, p_seg, q3, lay.index)
     disp = moved[best, lay.index] + off  # (S,): x segments, then y segments
+    return FlowField(lay.centers, disp.reshape(2, -1).T.copy(), _confidence(p_seg, ratio), bsz, (w, h))
+
+
+def _sizes(shape: tuple[int, int], block: int | None, step: int | None, search: int | None,
+           global_search: int | None) -> tuple[int, int, int, int]:
+    """:func:`block_flow`'s block, step, search and global search (px) for frames of
+    ``shape``, the defaults filled in; a ValueError naming the first out of its range."""
+    h, w = shape
+    bsz = default_block(shape) if block is None else int(block)
+    stp = bsz if step is None else int(step)
+    if not 8 <= bsz <= min(h, w):
+        raise ValueError(f"block must be in [8, {min(h, w)}] px for {w} x {h} frames, got {bsz}")
+    if stp < 1 or bsz % stp:
+        raise ValueError(f"step must divide block ({bsz}), got {stp}")
+    srch = max(3, bsz // 8) if search is None else int(search)
+    gsrch = max(srch, min(h, w) // 4) if global_search is None else int(global_search)
+    if srch < 1 or gsrch < 1:
+        raise ValueError(f"search ranges must be >= 1, got search={srch}, global_search={gsrch}")
+    return bsz, stp, srch, gsrch
+
+
+def _confidence(p_seg: NDArray, ratio: NDArray) -> NDArray[np.float64]:
+    """Each block's confidence from its x and y segments (the first frame's profiles
+    ``p_seg`` (S, L) and the best-to-runner-up cost ``ratio`` (S,), x segments then y): the
+    worse direction's ``1 - ratio`` times its texture relative to the median block's (at most 1)."""
     texture = np.vecdot(p_seg, p_seg).reshape(2, -1).min(axis=0)
     ratio = ratio.reshape(2, -1).max(axis=0)
     half = texture.size // 2
     ref = float(np.partition(texture, half)[half]) if texture.size else 0.0  # median
     conf = (1.0 - ratio) * (np.minimum(texture / ref, 1.0) if ref > 0 else 0.0)  # ratio is in [0, 1]
-    return FlowField(lay.centers, disp.reshape(2, -1).T.copy(), conf.astype(np.float64), bsz, (w, h))
+    return conf.astype(np.float64)

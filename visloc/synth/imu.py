@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from visloc._checks import check_int
+from visloc.pose.rotations import euler_to_matrix
 from visloc.synth._checks import check_number
 
 FloatArray = NDArray[np.float64]
@@ -209,18 +210,7 @@ def imu_stream(
         cp * dtheta + sp * ct * dpsi,
         -sp * dtheta + cp * ct * dpsi,
     ])
-    spsi, cpsi = np.sin(psi), np.cos(psi)
-    # R = Rz(psi) Ry(theta) Rx(phi) (report eq. 2.6); f = R^T (a - g e3)
-    rot = np.empty((n, 3, 3))
-    rot[:, 0, 0] = ct * cpsi
-    rot[:, 0, 1] = sp * st * cpsi - cp * spsi
-    rot[:, 0, 2] = cp * st * cpsi + sp * spsi
-    rot[:, 1, 0] = ct * spsi
-    rot[:, 1, 1] = sp * st * spsi + cp * cpsi
-    rot[:, 1, 2] = cp * st * spsi - sp * cpsi
-    rot[:, 2, 0] = -st
-    rot[:, 2, 1] = ct * sp
-    rot[:, 2, 2] = ct * cp
+    rot = euler_to_matrix(np.column_stack([phi, theta, psi]))  # Rz(psi) Ry(theta) Rx(phi), report eq. (2.6)
     force = np.einsum("nji,nj->ni", rot, acc - np.array([0.0, 0.0, gravity]))
 
     gyro = rates + bias + gyro_noise * rng.standard_normal((n, 3))

@@ -438,11 +438,12 @@ def test_stage_3c_leaves_isolated_markers_alone(monkeypatch):
 
 
 @pytest.mark.parametrize("native", [None, False])
-def test_coarse_pass_quads_on_dark_frames_get_a_wide_refinement_first(native):
+def test_coarse_pass_quads_on_dark_frames_are_refined_from_a_wide_refinement_too(native):
     # Dark, noisy 1280 x 720 camera-like frames: these markers are found only by the coarse
     # search passes, whose contours put one side of each quad 10-34 px off at one end. Stage 8
-    # (0.4 cell, at most 5 px) cannot reach that; the wide first refinement (0.4 cell uncapped)
-    # brings every corner within 2.5 px. Without it (coarse_scale=None) corners stay 16-30 px off.
+    # (0.4 cell, at most 5 px) cannot reach that; the refinement from a wide first one (0.4 cell
+    # uncapped), kept where its sides sit on stronger edges, brings every corner within 2.5 px.
+    # Without it (coarse_scale=None) corners stay 16-30 px off.
     scenes = [random_scene(np.random.default_rng([700, 1280, i, 4]), size=(1280, 720), difficulty="dark", camera=True)
               for i in (8, 11)]
     worst = {}

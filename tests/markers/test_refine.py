@@ -5,6 +5,7 @@ import pytest
 from tests.conftest import render_square
 from visloc.markers.refine import (
     NATIVE_REFINE,
+    edge_contrast,
     edge_offsets,
     edge_points,
     refine_quads,
@@ -39,6 +40,24 @@ def test_sample_edge_profiles_shapes_and_outward_normals():
     assert base.shape == (1, 4, 10, 2) and normals.shape == (1, 4, 2) and prof.shape == (1, 4, 10, 5)
     assert np.allclose(normals[0], [[0, -1], [1, 0], [0, 1], [-1, 0]])
     assert (prof[..., 0] < prof[..., -1]).all()  # dark inside, bright outside
+
+
+def test_edge_contrast_is_largest_on_the_edges():
+    truth = np.array([[30, 30], [70, 30], [70, 70], [30, 70.0]])
+    img = render_square((100, 100), truth, blur=1.0)
+    c = np.array([[50.0, 50.0]])
+    grown = lambda d: c + (truth - c) * (20 + d) / 20  # each side d px outward
+    quads = np.array([grown(d) for d in (-4, -2, 0, 2, 4)] + [truth + [3.0, 0.0]])
+    got = edge_contrast(img, quads)
+    assert got.shape == (6,) and int(np.argmax(got)) == 2
+    assert got[2] > 0.6 * (float(img.max()) - float(img.min()))  # 1-2 px either side of a 1 px blur
+    assert np.all(got[[0, 1, 3, 4, 5]] < got[2] - 10)
+    assert edge_contrast(img, truth).shape == (1,)
+    assert edge_contrast(255 - img, truth)[0] < 0  # bright on dark: the sides read inside out
+    with pytest.raises(ValueError, match="count"):
+        edge_contrast(img, truth, count=0)
+    with pytest.raises(ValueError, match="finite"):
+        edge_contrast(img, truth * np.nan)
 
 
 def test_edge_points_lie_on_the_sides_of_a_blurred_square():

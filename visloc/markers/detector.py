@@ -59,7 +59,7 @@ from visloc.markers.contours import CandidateFilter, find_candidates, outer_bord
 from visloc.markers.corners import _NEXT, RadialSplit
 from visloc.markers.corners_batch import fit_quads
 from visloc.markers.dictionary import Dictionary, load_dictionary
-from visloc.markers.refine import refine_quads
+from visloc.markers.refine import edge_contrast, refine_quads
 from visloc.markers.response import response_lut
 from visloc.types import MarkerDetection
 
@@ -173,14 +173,20 @@ class DetectorParams:
         Largest corner move (px) of a converged stage 8 pass.
     coarse_scale : float or None
         Candidates from search passes this coarse or coarser (full-resolution px per pass
-        pixel) start stage 8 with a wide refinement: ``coarse_iterations`` passes with
-        profiles 0.4 cell wide (stage 8's own width without its ``refine_max_radius`` cap),
-        its corners taken where they moved more than stage 8's radius. A coarse pass's
-        contour on a noisy dark frame can put a side several pixels off at one end, beyond
-        stage 8's reach (on camera-like dark 1280 x 720 renders about one corner in twenty
-        was 7-30 px off). None: no wide refinement.
+        pixel) are refined a second way too: ``coarse_iterations`` passes with profiles 0.4
+        cell wide (stage 8's own width without its ``refine_max_radius`` cap) from the
+        stage-7 quad, then stage 8; the refinement whose sides sit on the stronger edges
+        (:func:`visloc.markers.refine.edge_contrast`) is kept. A coarse pass's contour on a
+        noisy dark frame can put a side several pixels off at one end, beyond stage 8's
+        reach (camera-like dark 1280 x 720 renders of three seeds,
+        ``bench/refine_window.py``: 7 of 133 found markers had a corner 3-30 px off without
+        it). Only quads whose 0.4-cell width exceeds their stage-8 radius (cells of 14 px or
+        more) pay for it. None: stage 8 alone.
     coarse_iterations : int
-        Passes of the wide refinement (3-6 did equally well on those renders, 8 worse).
+        Passes of the wide refinement: a stage-7 quad can be more than a cell off at one end,
+        and each pass moves a side at most 0.4 cell (10, 12 and 16 did equally well on dark
+        renders of four seeds, the markers bench's included, and 10 costs least; 4 and 8 left
+        corners 8-15 px off there).
     bend : bool
         Stage 8b on/off: the corners where the sides, fitted as quadratic curves in stage 8's
         last pass, meet (lens distortion bends straight sides; a side stays a line unless its
@@ -256,7 +262,7 @@ class DetectorParams:
     refine_max_radius: int = 5
     refine_profiles: int = 24
     coarse_scale: float | None = 3.0
-    coarse_iterations: int = 4
+    coarse_iterations: int = 10
     bend: bool = True
     bend_radius: int = 3
     noisy_bend_radius: int | None = 2
@@ -845,12 +851,10 @@ class MarkerDetector:
         if p.refine:  # stage 8, batched
             side = np.sqrt(np.abs(_areas(quads)))
             radii = p.refine_radius or np.clip(np.round(0.4 * side / n_cells), 1, p.refine_max_radius).astype(int)
-            start = quads if coarse is None else self._wide_start(gray, quads, radii, side / n_cells, coarse, inverted)
-            corners, refined = refine_quads(gray, start, radius=radii, iterations=p.refine_iterations,
-                                            max_iterations=p.refine_max_iterations, tolerance=p.refine_tolerance,
-                                            count=p.refine_profiles, response=self._luts[inverted],
-                                            bend=p.bend, bend_radius=p.bend_radius,
-                                            noisy_bend_radius=p.noisy_bend_radius, native=p.native)  # 8, 8b
+            corners, refined = self._stage8(gray, quads, radii, inverted)  # 8, 8b
+            if coarse is not None:
+                corners, refined = self._coarse_refit(gray, quads, corners, refined, radii, side / n_cells, coarse,
+                                                      inverted)
         cells, (valid, bits, margin, contrast, thr) = read_cells(  # stage 9, batched
             gray, corners, n_cells, per_side=4, border_error_rate=p.border_error_rate, border=bb,
             min_quiet_zone=p.min_quiet_zone, native=p.native)
@@ -867,24 +871,39 @@ class MarkerDetector:
             accept[acc[~clear]] = False
         return corners, refined, cells, reads, accept, confidence
 
-    def _wide_start(self, gray: NDArray[np.uint8], quads: NDArray, radii: NDArray | int, cell: NDArray,
-                    coarse: NDArray, inverted: bool) -> NDArray:
-        """Stage 8's start for quads (K, 4, 2) with cells ``cell`` (K,) px: the coarse ones
-        (``coarse`` (K,) bool) whose 0.4-cell width exceeds stage 8's ``radii`` refined first
-        with that width (``coarse_iterations`` passes), taken where a corner moved more than
-        the quad's stage-8 radius (a quad within that reach is left to stage 8 alone)."""
+    def _stage8(self, gray: NDArray[np.uint8], quads: NDArray, radii: NDArray | int, inverted: bool
+                ) -> tuple[NDArray, NDArray[np.bool_]]:
+        """Stages 8 and 8b on quads (K, 4, 2) with profile half-widths ``radii``: the refined
+        corners and whether each refinement stood (:func:`~visloc.markers.refine.refine_quads`)."""
+        p = self.params
+        return refine_quads(gray, quads, radius=radii, iterations=p.refine_iterations,
+                            max_iterations=p.refine_max_iterations, tolerance=p.refine_tolerance,
+                            count=p.refine_profiles, response=self._luts[inverted], bend=p.bend,
+                            bend_radius=p.bend_radius, noisy_bend_radius=p.noisy_bend_radius, native=p.native)
+
+    def _coarse_refit(self, gray: NDArray[np.uint8], quads: NDArray, corners: NDArray, refined: NDArray,
+                      radii: NDArray | int, cell: NDArray, coarse: NDArray, inverted: bool
+                      ) -> tuple[NDArray, NDArray[np.bool_]]:
+        """Stage 8 again from a wide first refinement for the coarse-pass quads (``coarse``
+        (K,) bool) whose 0.4-cell width (``cell`` (K,) px) exceeds their stage-8 ``radii``:
+        ``coarse_iterations`` passes at that width from the stage-7 ``quads``, then stages 8
+        and 8b. Where that stands and its sides sit on stronger edges
+        (:func:`~visloc.markers.refine.edge_contrast`) than the first refinement's
+        ``corners`` (or that one failed), it replaces them; returns ``(corners, refined)``."""
         p = self.params
         radii = np.broadcast_to(radii, (len(quads),))
         wide = np.clip(np.round(0.4 * cell), 1, 50).astype(int)
         pick = np.flatnonzero(coarse & (wide > radii))
         if not len(pick):
-            return quads
-        moved, ok = refine_quads(gray, quads[pick], radius=wide[pick], iterations=p.coarse_iterations,
+            return corners, refined
+        start, ok = refine_quads(gray, quads[pick], radius=wide[pick], iterations=p.coarse_iterations,
                                  count=p.refine_profiles, response=self._luts[inverted], native=p.native)
-        far = ok & (np.abs(moved - quads[pick]).max(axis=(1, 2)) > radii[pick])
-        start = quads.copy()
-        start[pick[far]] = moved[far]
-        return start
+        again, ok2 = self._stage8(gray, start, radii[pick], inverted)
+        ok &= ok2
+        better = ok & (~refined[pick] | (edge_contrast(gray, again) > edge_contrast(gray, corners[pick])))
+        corners, refined = corners.copy(), refined.copy()
+        corners[pick[better]], refined[pick[better]] = again[better], True
+        return corners, refined
 
     def _second_reads(self, gray: NDArray[np.uint8], quads: NDArray, corners: NDArray, refined: NDArray,
                       cells: CellSample, reads: list[NDArray], *, retry_fit: bool = True) -> CellSample:

@@ -59,7 +59,8 @@ _LEVEL_Z = 3.0  # standard errors for a side's own levels (_side_levels, as _ref
 #: about as much each pass, and a side that walks along a shadow keeps moving (as _refine.c)
 _SHRINK = 0.8
 
-__all__ = ["NATIVE_REFINE", "bend_corners", "edge_offsets", "edge_points", "refine_quads", "sample_edge_profiles"]
+__all__ = ["NATIVE_REFINE", "bend_corners", "edge_contrast", "edge_offsets", "edge_points", "refine_quads",
+           "sample_edge_profiles"]
 
 
 def _to_light(gray: NDArray[np.uint8], response: str | float | NDArray) -> NDArray:
@@ -142,6 +143,43 @@ def sample_edge_profiles(
                      borderMode=cv2.BORDER_REPLICATE)
     base = np.swapaxes(frame[:, :, :2] @ centres, 1, 2).reshape(k, 4, count, 2)
     return base, normals, prof.astype(np.float32).reshape(k, 4, count, -1)
+
+
+def edge_contrast(gray: NDArray, quads: NDArray, *, count: int = 32) -> NDArray[np.float64]:
+    """How well each quad's sides sit on dark-to-bright edges: the mean grey level 1-2 px
+    outside the sides less the mean 1-2 px inside, along ``count`` normals per side over
+    the middle 80 % of each side (:func:`sample_edge_profiles` with radius 2).
+
+    A side a few pixels off its edge has both of its sample rows on the same side of the
+    edge along part of it, so the difference falls; the detector keeps, of two refinements
+    of one marker, the one with the larger (stage 8's wide first refinement,
+    :class:`~visloc.markers.DetectorParams` ``coarse_scale``).
+
+    Parameters
+    ----------
+    gray : ndarray (H, W) uint8 or float32
+        Grey image (dark markers on a bright surround).
+    quads : ndarray (K, 4, 2) or (4, 2)
+        Corners ``(x, y)``, px, clockwise in the image.
+    count : int
+        Normals per side (>= 1).
+
+    Returns
+    -------
+    ndarray (K,) float64
+        Outside minus inside, grey levels (negative where the sides are inside out).
+
+    Raises
+    ------
+    ValueError
+        If ``gray`` is not a non-empty (H, W) image, a corner is not finite or ``count`` < 1.
+    """
+    if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
+        raise ValueError(f"count must be an integer >= 1, got {count!r}")
+    prof = sample_edge_profiles(gray, quads, 2, count=int(count), end_gap=0.1)[2]  # offsets -2 .. 2, inside first
+    k = len(prof)
+    return (prof[..., 3:].reshape(k, -1).mean(axis=1, dtype=np.float64)
+            - prof[..., :2].reshape(k, -1).mean(axis=1, dtype=np.float64))
 
 
 def edge_offsets(profiles: NDArray, black: NDArray | float, white: NDArray | float) -> NDArray[np.float64]:

@@ -13,8 +13,9 @@ more: the dark frames). The choice kept is the one that does best over all sets,
 was checked on scenes from another seed too: ``--seed 700``); the markers bench
 (``bench/markers.py``) then measures the detector on its own frames.
 
-A second table: stage 8's wide first refinement of the quads from coarse search passes
-(``DetectorParams.coarse_scale``) off and on, on dark 1280 x 720 frames of seeds 300, 700, 900.
+A second table: the second refinement of the quads from coarse search passes (from a wide
+first refinement, kept where its sides sit on stronger edges: ``DetectorParams.coarse_scale``)
+off and on, on dark 1280 x 720 frames of seeds 300, 700, 900.
 """
 
 from __future__ import annotations
@@ -83,7 +84,7 @@ def _errors(det: MarkerDetector, scenes: list) -> dict:
 
 
 def run_coarse(n: int) -> list[dict]:
-    """Stage 8's wide first refinement of coarse-pass quads (``coarse_scale``) on and off, on
+    """The second refinement of coarse-pass quads (``coarse_scale``) off and on, on
     dark 1280 x 720 camera-like frames of :data:`COARSE_SEEDS` (where the coarse passes find
     the large markers and their contours can be far off)."""
     detectors = {"off (coarse_scale=None)": MarkerDetector("DICT_4X4_50", coarse_scale=None),
@@ -112,7 +113,7 @@ def markdown(result: dict) -> str:
         name = f"{row['size'][0]}x{row['size'][1]} {row['dictionary']} {row['set']}"
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     settings = list(result["coarse"][0]["by_setting"])
-    lines += ["", (f"**Stage 8's wide first refinement of coarse-pass quads** (1280x720 DICT_4X4_50 dark, "
+    lines += ["", (f"**Coarse-pass quads refined a second way, from a wide first refinement** (1280x720 DICT_4X4_50 dark, "
                   f"{result['scenes_per_set']} camera-like scenes per seed; found / markers, median and RMS corner "
                   f"error px, found markers with a corner more than {GROSS:g} px off)"), "",
               "| seed | " + " | ".join(settings) + " |", "|---|" + "---|" * len(settings)]

@@ -843,18 +843,17 @@ class MarkerDetector:
         ``accept`` (K,) the candidates that decode and pass OpenCV's cell-area check.
         ``retry_fit`` False: no second read through ``quads`` themselves (they are
         predictions, not stage-7 fits). ``coarse`` (K,) bool: the quads from coarse search
-        passes (``coarse_scale``), which start stage 8 with a wide refinement."""
+        passes (``coarse_scale``), refined a second way too (:meth:`_coarse_refit`)."""
         p = self.params
         bb = p.border_bits
         n_cells = self.dictionary.marker_size + 2 * bb
         corners, refined = quads, np.zeros(len(quads), bool)
         if p.refine:  # stage 8, batched
-            side = np.sqrt(np.abs(_areas(quads)))
-            radii = p.refine_radius or np.clip(np.round(0.4 * side / n_cells), 1, p.refine_max_radius).astype(int)
+            width = np.round(0.4 * np.sqrt(np.abs(_areas(quads))) / n_cells)  # 0.4 cell, px
+            radii = p.refine_radius or np.clip(width, 1, p.refine_max_radius).astype(int)
             corners, refined = self._stage8(gray, quads, radii, inverted)  # 8, 8b
             if coarse is not None:
-                corners, refined = self._coarse_refit(gray, quads, corners, refined, radii, side / n_cells, coarse,
-                                                      inverted)
+                corners, refined = self._coarse_refit(gray, quads, corners, refined, radii, width, coarse, inverted)
         cells, (valid, bits, margin, contrast, thr) = read_cells(  # stage 9, batched
             gray, corners, n_cells, per_side=4, border_error_rate=p.border_error_rate, border=bb,
             min_quiet_zone=p.min_quiet_zone, native=p.native)
@@ -882,17 +881,17 @@ class MarkerDetector:
                             bend_radius=p.bend_radius, noisy_bend_radius=p.noisy_bend_radius, native=p.native)
 
     def _coarse_refit(self, gray: NDArray[np.uint8], quads: NDArray, corners: NDArray, refined: NDArray,
-                      radii: NDArray | int, cell: NDArray, coarse: NDArray, inverted: bool
+                      radii: NDArray | int, width: NDArray, coarse: NDArray, inverted: bool
                       ) -> tuple[NDArray, NDArray[np.bool_]]:
         """Stage 8 again from a wide first refinement for the coarse-pass quads (``coarse``
-        (K,) bool) whose 0.4-cell width (``cell`` (K,) px) exceeds their stage-8 ``radii``:
-        ``coarse_iterations`` passes at that width from the stage-7 ``quads``, then stages 8
+        (K,) bool) whose 0.4-cell width (``width`` (K,) px, rounded) exceeds their stage-8
+        ``radii``: ``coarse_iterations`` passes at that width from the stage-7 ``quads``, then stages 8
         and 8b. Where that stands and its sides sit on stronger edges
         (:func:`~visloc.markers.refine.edge_contrast`) than the first refinement's
         ``corners`` (or that one failed), it replaces them; returns ``(corners, refined)``."""
         p = self.params
         radii = np.broadcast_to(radii, (len(quads),))
-        wide = np.clip(np.round(0.4 * cell), 1, 50).astype(int)
+        wide = np.clip(width, 1, 50).astype(int)
         pick = np.flatnonzero(coarse & (wide > radii))
         if not len(pick):
             return corners, refined

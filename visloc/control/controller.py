@@ -9,18 +9,20 @@ torques for large set-point errors (§4.4) and the motor commands ``pwm = sqrt(G
 from __future__ import annotations
 
 import math
+import operator
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from visloc.control._checks import as_array, check_params, check_real, resolve_arm
 from visloc.control.design import ControllerGains, ControlSpecs, design_gains
-from visloc.control.linear import _pilot_state, hover_input
+from visloc.control.linear import _pilot_values, hover_input
 from visloc.model.params import ARDRONE2, ARDrone2Params
 from visloc.model.propulsion import PwmResult, mixer_matrix, pwm_from_bar
 from visloc.types import FloatArray
 
 _POSITION_COLUMNS = np.r_[0:6, 12:16]  # x_P..w_P and the integrals: the "set-point" part
+_POSITION_INDEX = _POSITION_COLUMNS.tolist()
 
 
 def wrap_angle(angle: float | FloatArray) -> float | FloatArray:
@@ -41,6 +43,14 @@ def wrap_angle(angle: float | FloatArray) -> float | FloatArray:
         return np.where(wrapped >= math.pi, wrapped - 2.0 * math.pi, wrapped)
     return wrapped - 2.0 * math.pi if wrapped >= math.pi else wrapped  # the modulo can round up to 2 pi
 
+
+def _error_values(s: list[float], sp: list[float]) -> list[float]:
+    """The pilot-frame error state (report eq. 4.1) of a state ``s`` (12 floats) from a set
+    point ``sp`` (4 floats) as 12 floats, the heading error wrapped
+    (:meth:`Controller.error_state`)."""
+    x = _pilot_values(s, s[8], sp[:3])
+    x[8] = wrap_angle(s[8] - sp[3])
+    return x
 
 def _zone(value: tuple[float, float], name: str) -> FloatArray:
     if not isinstance(value, (tuple, list)) or len(value) != 2:
@@ -112,6 +122,11 @@ class Controller:
             a.setflags(write=False)  # fixed, and what follows is derived from them
         self._K_setpoint = self._K[:, _POSITION_COLUMNS]  # the columns of the set-point part (§4.4)
         self._gamma_inv = np.linalg.inv(self._gamma)  # report eq. (4.6)'s Gamma^-1
+        # the same matrices as rows of floats: every step multiplies them by 16 and 4 numbers,
+        # which plain floats do several times faster than small arrays
+        self._K_rows = self._K.tolist()
+        self._K_setpoint_rows = self._K_setpoint[1:3].tolist()  # only tau_x, tau_y are bounded
+        self._gamma_inv_rows = self._gamma_inv.tolist()
         tilt = check_real(max_tilt, "max_tilt", positive=True, allow_inf=True)
         self.torque_bound = np.array([self.gains.roll.kp, self.gains.pitch.kp]) * tilt
         self.u0 = hover_input(self.params)  # report §4.2.2: T0 = m g feed-forward
@@ -158,42 +173,39 @@ class Controller:
         """
         s = as_array(state, "state", (12,))
         sp = as_array(setpoint, "setpoint", (4,))
-        x = _pilot_state(s, float(s[8]), sp[:3])  # report eq. (4.1) (to_pilot, checked above)
-        x[8] = wrap_angle(s[8] - sp[3])
-        return x
+        return np.array(_error_values(s.tolist(), sp.tolist()))
 
-    def _inputs(self, x: FloatArray, integral: FloatArray) -> tuple[FloatArray, tuple[bool, ...]]:
-        xa = np.concatenate([x, integral])
-        du = -(self.K @ xa)  # report eq. (4.5): u = -K x
-        setpoint_part = -(self._K_setpoint @ xa[_POSITION_COLUMNS])
-        attitude_part = du - setpoint_part
-        # §4.4: bound the set-point part of tau_x, tau_y (np.clip on floats: min(max(v, -b), b))
+    def _inputs(self, x: list[float], integral: list[float]) -> tuple[list[float], tuple[bool, ...]]:
+        """``u0 + du`` (4 floats) for the error state ``x`` (12 floats) and the integrals (4),
+        with the bounds of §4.4 applied, and which bounds were active."""
+        xa = x + integral
+        du = [-sum(map(operator.mul, row, xa)) for row in self._K_rows]  # report eq. (4.5): u = -K x
+        xs = [xa[i] for i in _POSITION_INDEX]
+        sx, sy = (-sum(map(operator.mul, row, xs)) for row in self._K_setpoint_rows)  # the set-point part
+        # §4.4: bound the set-point part of tau_x, tau_y
         bx, by = self.torque_bound.tolist()
-        sx, sy = float(setpoint_part[1]), float(setpoint_part[2])
         tx, ty = min(max(sx, -bx), bx), min(max(sy, -by), by)
-        du[1], du[2] = float(attitude_part[1]) + tx, float(attitude_part[2]) + ty
+        du[1], du[2] = (du[1] - sx) + tx, (du[2] - sy) + ty  # the attitude part plus the bounded one
         limit = self.max_thrust_change
-        thrust = float(du[0])
-        dt_limited = min(max(thrust, -limit), limit)
-        du[0] = dt_limited
+        thrust = du[0]
+        du[0] = min(max(thrust, -limit), limit)
         # tau_x moves y, tau_y moves x; the thrust bound freezes z
-        return self.u0 + du, (ty != sy, tx != sx, dt_limited != thrust, False)
+        u = [a + b for a, b in zip(self.u0.tolist(), du, strict=True)]
+        return u, (ty != sy, tx != sx, du[0] != thrust, False)
 
-    def _feed_forward(self, x: FloatArray, psi: float, reference: tuple[ArrayLike, ArrayLike]) -> float:
-        """Shift the error state ``x`` (in place) by a reference motion and return the thrust
-        to add: the reference velocity in the pilot frame, the roll and pitch that give the
-        reference acceleration (``x'' = -g theta``, ``y'' = g phi`` near hover, report eq. 4.1's
-        frame), and the thrust that keeps the height under that tilt."""
-        v_ref = as_array(reference[0], "reference velocity", (3,))
-        a_ref = as_array(reference[1], "reference acceleration", (3,))
-        c, s = math.cos(psi), math.sin(psi)
-        rot = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])  # R_psi^T: A -> pilot frame
-        v_p, a_p = rot @ v_ref, rot @ a_ref
+    def _feed_forward(self, x: list[float], psi: float, reference: tuple[ArrayLike, ArrayLike]) -> float:
+        """Shift the error state ``x`` (12 floats, in place) by a reference motion and return
+        the thrust to add: the reference velocity in the pilot frame, the roll and pitch that
+        give the reference acceleration (``x'' = -g theta``, ``y'' = g phi`` near hover, report
+        eq. 4.1's frame), and the thrust that keeps the height under that tilt."""
+        vx, vy, vz = as_array(reference[0], "reference velocity", (3,)).tolist()
+        ax, ay, az = as_array(reference[1], "reference acceleration", (3,)).tolist()
+        c, s = math.cos(psi), math.sin(psi)  # R_psi^T: A -> pilot frame
         g, m = self.params.g, self.params.mass
-        up = g - a_p[2]  # z points down
-        theta = math.atan2(-a_p[0], up)
-        phi = math.atan2(a_p[1] * math.cos(theta), up)
-        x[3:6] -= v_p
+        up = g - az  # z points down
+        theta = math.atan2(-(c * ax + s * ay), up)
+        phi = math.atan2((-s * ax + c * ay) * math.cos(theta), up)
+        x[3], x[4], x[5] = x[3] - (c * vx + s * vy), x[4] - (-s * vx + c * vy), x[5] - vz
         x[6] -= phi
         x[7] -= theta
         return m * up / (math.cos(phi) * math.cos(theta)) - m * g
@@ -222,18 +234,20 @@ class Controller:
             Thrust (N) and body torques (N m), feed-forward ``T0 = m g`` included.
         """
         step = check_real(dt, "dt", nonneg=True)
-        x = self.error_state(state, setpoint)
-        thrust_ff = 0.0 if reference is None else self._feed_forward(x, float(np.asarray(state, float)[8]), reference)
-        _, clipped = self._inputs(x, self._integral)
-        v = x.tolist()
-        e, rate = (v[0], v[1], v[2], v[8]), (v[3], v[4], v[5], v[11])
+        s = as_array(state, "state", (12,)).tolist()
+        x = _error_values(s, as_array(setpoint, "setpoint", (4,)).tolist())
+        thrust_ff = 0.0 if reference is None else self._feed_forward(x, s[8], reference)
+        integral = self._integral.tolist()
+        _, clipped = self._inputs(x, integral)
+        e, rate = (x[0], x[1], x[2], x[8]), (x[3], x[4], x[5], x[11])
         zone, rate_zone = self.integral_zone.tolist(), self.integral_rate_zone.tolist()
         # §4.2.3: integrate unless that axis's command is clipped or it moves outside its zone
-        self._integral = np.array([i if c or (abs(a) > z and abs(b) > w) else i + a * step for i, c, a, b, z, w
-                                   in zip(self._integral.tolist(), clipped, e, rate, zone, rate_zone, strict=True)])
-        u, _ = self._inputs(x, self._integral)
+        integral = [i if c or (abs(a) > z and abs(b) > w) else i + a * step for i, c, a, b, z, w
+                    in zip(integral, clipped, e, rate, zone, rate_zone, strict=True)]
+        self._integral = np.array(integral)
+        u, _ = self._inputs(x, integral)
         u[0] += thrust_ff
-        return u
+        return np.array(u)
 
     def pwm(self, state: ArrayLike, setpoint: ArrayLike, dt: float, *,
             reference: tuple[ArrayLike, ArrayLike] | None = None) -> PwmResult:
@@ -251,5 +265,6 @@ class Controller:
             :func:`visloc.model.pwm_from_inputs` gives them with the mean-coefficient mixer
             (whose inverse the controller keeps).
         """
-        u = self.command(state, setpoint, dt, reference=reference)
-        return pwm_from_bar(self._gamma_inv @ u, self.params.k)  # report eq. (4.6): sqrt(Gamma^-1 u) - k
+        u = self.command(state, setpoint, dt, reference=reference).tolist()
+        bar = [sum(map(operator.mul, row, u)) for row in self._gamma_inv_rows]
+        return pwm_from_bar(np.array(bar), self.params.k)  # report eq. (4.6): sqrt(Gamma^-1 u) - k

@@ -63,6 +63,7 @@ import numpy as np
 from filterpy.kalman import KalmanFilter
 from scipy.stats import chi2
 
+from visloc._checks import all_finite
 from visloc.estimation._checks import FloatArray, as_float_array, check_real
 
 __all__ = ["PositionVelocityKF"]
@@ -423,7 +424,7 @@ class PositionVelocityKF:
         if self.t is not None and t < self.t:
             raise ValueError(f"out-of-order timestamp: t={t!r} is earlier than the last time "
                              f"{self.t!r}")
-        if u is not None and not np.isfinite(u).all():  # counted once the call is known to stand
+        if u is not None and not all_finite(u):  # counted once the call is known to stand
             self.skipped["accel_input"] += 1
             u = None
         if self.t is None:

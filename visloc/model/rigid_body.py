@@ -65,17 +65,32 @@ def rotation_matrix(lam: ArrayLike) -> FloatArray:
     ValueError
         ``lam`` not (3,) or not finite.
     """
-    phi, theta, psi = _vector(lam, "lam", 3)
+    return np.array(rotation_values(*_vector(lam, "lam", 3).tolist()))
+
+
+def rotation_values(phi: float, theta: float, psi: float) -> list[list[float]]:
+    """:func:`rotation_matrix` on Python floats, without its argument checks: its three rows
+    (the loops of :mod:`visloc.sim` build one at every step, where floats are faster than a
+    checked array).
+
+    Parameters
+    ----------
+    phi, theta, psi : float
+        Roll, pitch and yaw, rad.
+
+    Returns
+    -------
+    list of 3 lists of 3 floats
+        The rows of ``R = Rz(psi) Ry(theta) Rx(phi)`` (body to inertial).
+    """
     cf, sf = math.cos(phi), math.sin(phi)
     ct, st = math.cos(theta), math.sin(theta)
     cp, sp = math.cos(psi), math.sin(psi)
-    return np.array(  # report eq. (2.6)
-        [
-            [ct * cp, cp * st * sf - cf * sp, sf * sp + cf * cp * st],
-            [ct * sp, cf * cp + st * sf * sp, cf * st * sp - cp * sf],
-            [-st, ct * sf, ct * cf],
-        ]
-    )
+    return [  # report eq. (2.6)
+        [ct * cp, cp * st * sf - cf * sp, sf * sp + cf * cp * st],
+        [ct * sp, cf * cp + st * sf * sp, cf * st * sp - cp * sf],
+        [-st, ct * sf, ct * cf],
+    ]
 
 
 def _check_pitch(theta: float) -> float:
@@ -117,6 +132,19 @@ def euler_rate_matrix(lam: ArrayLike) -> FloatArray:
             [0.0, sf / ct, cf / ct],
         ]
     )
+
+
+def euler_rate_values(lam: list[float], omega: list[float]) -> list[float]:
+    """``Q(lambda) omega`` (report eq. 2.7) on Python floats, without argument checks: the
+    Euler angle rates (rad/s) of body rates ``omega = [p, q, r]`` (rad/s) at angles ``lam =
+    [phi, theta, psi]`` (rad), as :func:`rhs_values` computes them (an attitude integrated
+    from a gyro at every step of :mod:`visloc.sim`'s loop)."""
+    phi, theta = lam[0], lam[1]
+    p, q, r = omega
+    cf, sf = math.cos(phi), math.sin(phi)
+    ct = math.cos(theta)
+    tt = math.sin(theta) / ct
+    return [p + (sf * q + cf * r) * tt, cf * q - sf * r, (sf * q + cf * r) / ct]
 
 
 def derivatives(
@@ -220,7 +248,6 @@ def rhs_values(s: list[float], u: list[float], mass: float, g: float, inertia: l
     ct, st = math.cos(theta), math.sin(theta)
     cp, sp = math.cos(psi), math.sin(psi)
     a = u[0] / mass
-    tt = st / ct
     mx, my, mz = u[1], u[2], u[3]  # report eq. (A.14)-(A.16)
     if gyroscopic:  # Euler's equation (see derivatives): moment - omega x (J omega)
         jx, jy, jz = inertia[0] * p, inertia[1] * q, inertia[2] * r
@@ -232,9 +259,7 @@ def rhs_values(s: list[float], u: list[float], mass: float, g: float, inertia: l
         -(cf * st * sp - cp * sf) * a,
         g - ct * cf * a,
         # report eq. (2.3) / (A.8)-(A.10): lambda' = Q(lambda) omega, eq. (2.7)
-        p + (sf * q + cf * r) * tt,
-        cf * q - sf * r,
-        (sf * q + cf * r) / ct,
+        *euler_rate_values(s[6:8], [p, q, r]),
         mx / inertia[0], my / inertia[1], mz / inertia[2],
     ]
 

@@ -21,7 +21,7 @@ from visloc.control._checks import as_array, check_params, check_real, resolve_a
 from visloc.control.robustness import max_sigma
 from visloc.model.params import ARDRONE2, ARDrone2Params
 from visloc.model.propulsion import mixer_matrix, pwm_bar
-from visloc.model.rigid_body import rhs_values, rotation_matrix
+from visloc.model.rigid_body import rhs_values, rotation_values
 from visloc.types import FloatArray
 
 __all__ = ["Vehicle", "motor_coefficients"]
@@ -169,11 +169,9 @@ class Vehicle:
         TypeError, ValueError
             ``force`` not 3 finite numbers.
         """
-        f = None if force is None else as_array(force, "force", (3,))
-        return self._f(self.state, self.inputs, f)[3:6]
-
-    def _f(self, s: FloatArray, u: FloatArray, force: FloatArray | None) -> FloatArray:
-        return np.array(self._values(s.tolist(), u.tolist(), None if force is None else force.tolist()))
+        f = None if force is None else as_array(force, "force", (3,)).tolist()
+        u = self._u if self.motor_lag == 0.0 and self._bar is self._target else self.inputs.tolist()
+        return np.array(self._values(self.state.tolist(), u, f)[3:6])
 
     def _values(self, s: list[float], u: list[float], force: list[float] | None) -> list[float]:
         """The state's derivative on floats (:func:`visloc.model.rigid_body.rhs_values`) with
@@ -242,4 +240,4 @@ class Vehicle:
 
     def rotation(self) -> FloatArray:
         """Body-to-inertial rotation ``R(lambda)`` (3, 3) of the current state (eq. 2.6)."""
-        return rotation_matrix(self.state[6:9])
+        return np.array(rotation_values(*self.state[6:9].tolist()))  # the state is finite (step checks it)

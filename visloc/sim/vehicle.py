@@ -208,9 +208,10 @@ class Vehicle:
         h = check_real(dt, "dt", positive=True)
         key = pwm.tobytes() if isinstance(pwm, np.ndarray) else None
         if key is None or key != self._last_key:  # a new command (the substeps of a control step repeat it)
-            cmd = np.clip(as_array(pwm, "pwm", (4,)), 0.0, self.pwm_max)
-            self._last_key, self._target = key, pwm_bar(cmd, self.params.k)  # report eqs. (2.17)-(2.18)
-            self.pwm = cmd
+            top, k = self.pwm_max, self.params.k  # (on floats: np.clip and pwm_bar's arrays cost more than the rest)
+            cmd = [min(max(v, 0.0), top) for v in as_array(pwm, "pwm", (4,)).tolist()]
+            bar = [(v + k) * (v + k) if v > 0 else 0.0 for v in cmd]  # report eqs. (2.17)-(2.18), as pwm_bar
+            self._last_key, self._target, self.pwm = key, np.array(bar), np.array(cmd)
         target = self._target
         if self.motor_lag > 0.0:  # report eq. (2.13), solved exactly over the step
             self._bar = target + (self._bar - target) * math.exp(-h / self.motor_lag)

@@ -201,3 +201,18 @@ def test_bad_input_is_rejected():
     s[7] = np.pi / 2
     with pytest.raises(ValueError, match="theta"):
         derivatives(s, HOVER, ARDRONE2)
+
+
+def test_float_helpers_agree_with_the_array_forms():
+    """The sim loop's float helpers give what the checked array functions give."""
+    from visloc.model.propulsion import pwm_bar_values
+    from visloc.model.rigid_body import euler_rate_values
+
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        lam = rng.uniform(-1.0, 1.0, 3)
+        omega = rng.normal(size=3)
+        np.testing.assert_allclose(euler_rate_values(lam.tolist(), omega.tolist()),
+                                   euler_rate_matrix(lam) @ omega, rtol=1e-12, atol=1e-12)
+        pwm = rng.uniform(-20.0, 100.0, 4)
+        np.testing.assert_allclose(pwm_bar_values(pwm.tolist(), 25.19), pwm_bar(pwm, 25.19), rtol=0, atol=0)

@@ -120,12 +120,12 @@ class Controller:
         self._K = self.gains.K(integral=True)
         for a in (self._gamma, self._K):
             a.setflags(write=False)  # fixed, and what follows is derived from them
-        self._K_setpoint = self._K[:, _POSITION_COLUMNS]  # the columns of the set-point part (§4.4)
         self._gamma_inv = np.linalg.inv(self._gamma)  # report eq. (4.6)'s Gamma^-1
-        # the same matrices as rows of floats: every step multiplies them by 16 and 4 numbers,
-        # which plain floats do several times faster than small arrays
+        # the gains and Gamma^-1 as rows of floats: every step multiplies them by 16 and 4
+        # numbers, which plain floats do several times faster than small arrays
         self._K_rows = self._K.tolist()
-        self._K_setpoint_rows = self._K_setpoint[1:3].tolist()  # only tau_x, tau_y are bounded
+        # the set-point part's columns (§4.4), of the rows of tau_x and tau_y (the bounded ones)
+        self._K_setpoint_rows = self._K[1:3, _POSITION_COLUMNS].tolist()
         self._gamma_inv_rows = self._gamma_inv.tolist()
         tilt = check_real(max_tilt, "max_tilt", positive=True, allow_inf=True)
         self.torque_bound = np.array([self.gains.roll.kp, self.gains.pitch.kp]) * tilt

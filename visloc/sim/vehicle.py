@@ -20,7 +20,7 @@ from numpy.typing import ArrayLike
 from visloc.control._checks import as_array, check_params, check_real, resolve_arm
 from visloc.control.robustness import max_sigma
 from visloc.model.params import ARDRONE2, ARDrone2Params
-from visloc.model.propulsion import mixer_matrix, pwm_bar
+from visloc.model.propulsion import mixer_matrix, pwm_bar, pwm_bar_values
 from visloc.model.rigid_body import rhs_values, rotation_values
 from visloc.types import FloatArray
 
@@ -208,9 +208,9 @@ class Vehicle:
         h = check_real(dt, "dt", positive=True)
         key = pwm.tobytes() if isinstance(pwm, np.ndarray) else None
         if key is None or key != self._last_key:  # a new command (the substeps of a control step repeat it)
-            top, k = self.pwm_max, self.params.k  # (on floats: np.clip and pwm_bar's arrays cost more than the rest)
+            top = self.pwm_max  # (on floats: np.clip and pwm_bar's arrays cost more than the arithmetic)
             cmd = [min(max(v, 0.0), top) for v in as_array(pwm, "pwm", (4,)).tolist()]
-            bar = [(v + k) * (v + k) if v > 0 else 0.0 for v in cmd]  # report eqs. (2.17)-(2.18), as pwm_bar
+            bar = pwm_bar_values(cmd, self.params.k)  # report eqs. (2.17)-(2.18)
             self._last_key, self._target, self.pwm = key, np.array(bar), np.array(cmd)
         target = self._target
         if self.motor_lag > 0.0:  # report eq. (2.13), solved exactly over the step

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from visloc.pose.gauss_newton import NATIVE_LM, _project, levenberg_marquardt
+from visloc.pose.gauss_newton import NATIVE_LM, _project, levenberg_marquardt, reprojection_rms
 
 
 def _problem(rng, planar):
@@ -62,3 +62,35 @@ def test_arrays_of_the_wrong_shape_are_refused_before_the_solver(native):
                        ((np.zeros((1, 6)), X, xy[:, :3], f, 5), "X must"), ((np.zeros((1, 6)), X, xy, f, -1), "max_iter")):
         with pytest.raises(ValueError, match=word):
             levenberg_marquardt(*args[:4], max_iter=args[4], native=native)
+
+
+@pytest.mark.parametrize("native", [False, True] if NATIVE_LM else [False])
+def test_reprojection_rms_is_each_markers_rms_of_the_residuals(native):
+    rng = np.random.default_rng(3)
+    f = np.array([[500.0], [480.0]])
+    for case in range(30):
+        X, xy, starts, _ = _problem(rng, planar=case % 2 == 0)
+        keep = len(X[0]) // 4 * 4
+        X, xy = X[:, :keep].copy(), xy[:, :keep].copy()
+        if case % 5 == 0:
+            starts[0, 2] = -1.0  # behind the camera: inf
+        got = reprojection_rms(starts, X, xy, f, native=native)
+        assert got.shape == (len(starts), keep // 4)
+        for s, p in enumerate(starts):
+            q, uv = (a[0] for a in _project(p[None], X)[:2])
+            z = q[2] + p[2]
+            d = ((uv - xy) * f) ** 2
+            want = np.sqrt(d.sum(axis=0).reshape(-1, 4).mean(axis=1))
+            want[(z <= 1e-9).reshape(-1, 4).any(axis=1)] = np.inf
+            np.testing.assert_allclose(got[s], want, rtol=1e-12)
+        single = reprojection_rms(starts[-1], X, xy, f, native=native)
+        np.testing.assert_array_equal(single, got[-1])
+
+
+@pytest.mark.parametrize("native", [False, True] if NATIVE_LM else [False])
+def test_reprojection_rms_refuses_runs_that_do_not_divide_the_points(native):
+    X, xy, f = np.ones((3, 6)), np.zeros((2, 6)), np.array([[1.0], [1.0]])
+    with pytest.raises(ValueError, match="group"):
+        reprojection_rms(np.zeros(6), X, xy, f, native=native)
+    with pytest.raises(ValueError, match="X must be"):
+        reprojection_rms(np.zeros(6), X, xy[:, :4], f, group=2, native=native)

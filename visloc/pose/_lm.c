@@ -11,6 +11,11 @@
  * levenberg_marquardt(params, X, xy, fx, fy, max_iter, rtol, rtol_other, max_iter_other, atol)
  *     params: float64 (S, 6); X: float64 (3, N); xy: float64 (2, N) normalized image
  *     coordinates; returns (params (S, 6), cost (S,), M (S, 7, 7)) as bytes of float64.
+ *
+ * group_rms(params, X, xy, fx, fy, group)
+ *     The RMS reprojection error (px) of each run of ``group`` points (a marker's corners)
+ *     under each start: bytes of float64 (S, N / group), inf where a point of the run is not in
+ *     front of the camera (visloc.pose.gauss_newton.reprojection_rms).
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -25,15 +30,22 @@ typedef struct {
     double fx, fy;
 } problem;
 
+/* R = Rz(psi) Ry(theta) Rx(phi) of the parameters p (report Appendix G). */
+static void rotation(const double p[6], double R[3][3]) {
+    double cph = cos(p[3]), sph = sin(p[3]), cth = cos(p[4]), sth = sin(p[4]), cps = cos(p[5]), sps = sin(p[5]);
+    double r[3][3] = {{cps * cth, cps * sth * sph - sps * cph, cps * sth * cph + sps * sph},
+                      {sps * cth, sps * sth * sph + cps * cph, sps * sth * cph - cps * sph},
+                      {-sth, cth * sph, cth * cph}};
+    memcpy(R, r, sizeof(r));
+}
+
 /* M = E^T E for the parameters p (E = [J | r], 2N rows); M[6][6] = inf when a point is not
  * in front of the camera. */
 static void normal_matrix(const problem *pr, const double p[6], double M[7][7]) {
-    double cph = cos(p[3]), sph = sin(p[3]), cth = cos(p[4]), sth = sin(p[4]), cps = cos(p[5]), sps = sin(p[5]);
-    double R[3][3] = {{cps * cth, cps * sth * sph - sps * cph, cps * sth * cph + sps * sph},
-                      {sps * cth, sps * sth * sph + cps * cph, sps * sth * cph - cps * sph},
-                      {-sth, cth * sph, cth * cph}};
-    /* columns: Euler rates -> rotation vector */
-    double W[3][3] = {{R[0][0], -sps, 0.0}, {R[1][0], cps, 0.0}, {-sth, 0.0, 1.0}};
+    double R[3][3], cps = cos(p[5]), sps = sin(p[5]);
+    rotation(p, R);
+    /* columns: Euler rates -> rotation vector (R[2][0] = -sin theta) */
+    double W[3][3] = {{R[0][0], -sps, 0.0}, {R[1][0], cps, 0.0}, {R[2][0], 0.0, 1.0}};
     memset(M, 0, sizeof(double) * 49);
     const int64_t n = pr->n;
     int behind = 0;
@@ -261,10 +273,60 @@ done:
     return result;
 }
 
+static PyObject *group_rms(PyObject *self, PyObject *args) {
+    (void)self;
+    Py_buffer pb, Xb, xyb;
+    double fx, fy;
+    int group;
+    if (!PyArg_ParseTuple(args, "y*y*y*ddi", &pb, &Xb, &xyb, &fx, &fy, &group)) return NULL;
+    PyObject *result = NULL;
+    Py_ssize_t S = pb.len / (6 * (Py_ssize_t)sizeof(double));
+    Py_ssize_t n = Xb.len / (3 * (Py_ssize_t)sizeof(double));
+    if (group < 1 || n % group || xyb.len != 2 * n * (Py_ssize_t)sizeof(double) ||
+        pb.len != S * 6 * (Py_ssize_t)sizeof(double)) {
+        PyErr_SetString(PyExc_ValueError, "group_rms: params (S, 6), X (3, N), xy (2, N), N a multiple of group");
+        goto done;
+    }
+    Py_ssize_t m = n / group;
+    PyObject *out = PyBytes_FromStringAndSize(NULL, S * m * (Py_ssize_t)sizeof(double));
+    if (!out) goto done;
+    double *rms = (double *)PyBytes_AS_STRING(out);
+    const double *P = pb.buf, *X = Xb.buf, *xy = xyb.buf;
+    for (Py_ssize_t s = 0; s < S; s++) {
+        const double *p = P + 6 * s;
+        double R[3][3];
+        rotation(p, R);
+        for (Py_ssize_t g = 0; g < m; g++) {
+            double sum = 0.0;
+            for (Py_ssize_t i = g * group; i < (g + 1) * group; i++) {
+                double X0 = X[i], X1 = X[n + i], X2 = X[2 * n + i];
+                double z = R[2][0] * X0 + R[2][1] * X1 + R[2][2] * X2 + p[2];
+                if (!(z > 1e-9)) {
+                    sum = INFINITY;
+                    break;
+                }
+                double du = ((R[0][0] * X0 + R[0][1] * X1 + R[0][2] * X2 + p[0]) / z - xy[i]) * fx;
+                double dv = ((R[1][0] * X0 + R[1][1] * X1 + R[1][2] * X2 + p[1]) / z - xy[n + i]) * fy;
+                sum += du * du + dv * dv;
+            }
+            double r = sqrt(sum / group);
+            rms[s * m + g] = isfinite(r) ? r : INFINITY;
+        }
+    }
+    result = out;
+done:
+    PyBuffer_Release(&pb);
+    PyBuffer_Release(&Xb);
+    PyBuffer_Release(&xyb);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"levenberg_marquardt", levenberg_marquardt, METH_VARARGS,
      "levenberg_marquardt(params, X, xy, fx, fy, max_iter, rtol, rtol_other, max_iter_other, atol)\n"
      "    -> (params, cost, M)\n\nSee visloc.pose.gauss_newton.levenberg_marquardt."},
+    {"group_rms", group_rms, METH_VARARGS,
+     "group_rms(params, X, xy, fx, fy, group) -> rms (S, N / group)\n\nSee visloc.pose.gauss_newton.reprojection_rms."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from visloc._compiled import use_compiled
+from visloc.pose.rotations import euler_to_matrix
 from visloc.types import FloatArray
 
 #: LM stops a start when a step lowers its squared error by less than this fraction (at a
@@ -137,6 +138,62 @@ def reprojection_residuals(
     if behind:
         r[(iz == 0.0).any(axis=1)] = np.inf
     return r
+
+
+def reprojection_rms(params: ArrayLike, X: ArrayLike, xy: ArrayLike, f: ArrayLike, *, group: int = 4,
+                     native: bool | None = None) -> FloatArray:
+    """The RMS reprojection error of each run of ``group`` points (a marker's four corners)
+    under one or several parameter vectors.
+
+    Parameters
+    ----------
+    params : array_like (6,) or (S, 6)
+        As for :func:`reprojection_residuals`.
+    X : array_like (3, N)
+        Object points, columns, object frame; N a multiple of ``group``.
+    xy : array_like (2, N)
+        Observed normalized image coordinates, columns.
+    f : array_like (2, 1)
+        ``[[fx], [fy]]``, px.
+    group : int
+        Points per run (>= 1): runs are ``X[:, :group]``, ``X[:, group:2 * group]``, ...
+    native : bool or None
+        As for :func:`levenberg_marquardt`.
+
+    Returns
+    -------
+    ndarray (N / group,) or (S, N / group)
+        ``sqrt(mean(|f * (projected - observed)|^2))`` over each run, px; ``inf`` where a point
+        of the run is not in front of the camera (depth <= 1e-9).
+
+    Raises
+    ------
+    ValueError
+        Shapes not as above, or ``group`` not a whole number >= 1 dividing N.
+    RuntimeError
+        ``native=True`` but the compiled version was not built.
+    """
+    p = np.asarray(params, np.float64)
+    X = np.asarray(X, np.float64)
+    xy = np.asarray(xy, np.float64)
+    f = np.asarray(f, np.float64)
+    if p.shape[-1:] != (6,) or p.ndim not in (1, 2):
+        raise ValueError(f"params must have shape (6,) or (S, 6), got {p.shape}")
+    if X.ndim != 2 or X.shape[0] != 3 or xy.shape != (2, X.shape[1]) or f.shape != (2, 1):
+        raise ValueError(f"X must be (3, N), xy (2, N) and f (2, 1), got {X.shape}, {xy.shape} and {f.shape}")
+    if isinstance(group, bool) or not isinstance(group, numbers.Integral) or group < 1 or X.shape[1] % group:
+        raise ValueError(f"group must be a whole number >= 1 dividing N = {X.shape[1]}, got {group!r}")
+    m = X.shape[1] // group
+    if use_compiled(native, _lm, "visloc.pose._lm"):
+        raw = _lm.group_rms(np.ascontiguousarray(p), np.ascontiguousarray(X), np.ascontiguousarray(xy),
+                            float(f[0, 0]), float(f[1, 0]), int(group))
+        return np.frombuffer(raw, np.float64).reshape(*p.shape[:-1], m).copy()
+    R = euler_to_matrix(p[..., 3:])  # (..., 3, 3)
+    q = X.T @ np.swapaxes(R, -1, -2) + p[..., None, :3]  # (..., N, 3)
+    z = np.where(q[..., 2] > 1e-9, q[..., 2], np.nan)
+    d = (q[..., :2] / z[..., None] - xy.T) * f[:, 0]
+    rms = np.sqrt(np.vecdot(d, d).reshape(*p.shape[:-1], m, group).mean(axis=-1))
+    return np.where(np.isfinite(rms), rms, np.inf)
 
 
 def residuals_and_jacobian(

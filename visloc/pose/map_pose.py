@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 
 from visloc._checks import all_finite
 from visloc.pose.camera import Camera
-from visloc.pose.gauss_newton import levenberg_marquardt, refine_params
+from visloc.pose.gauss_newton import levenberg_marquardt, reprojection_rms
 from visloc.pose.maps import MarkerMap
 from visloc.pose.marker_pose import MIN_PIXEL_SIGMA
 from visloc.pose.planar import planar_solutions
@@ -200,21 +200,19 @@ def estimate_camera_pose(
     f = np.array([[camera.fx], [camera.fy]])
     fit = None
     if start is not None:  # a pose near the answer: kept only if no marker disagrees with it
-        fit = _joint_fit(np.concatenate([start.t, matrix_to_euler(start.R)]), obj, xy, f, camera, ids,
+        fit = _joint_fit(np.concatenate([start.t, matrix_to_euler(start.R)]), obj, xy, f, ids,
                          max_iter, max_residual)
-        _, kept, dropped, res = fit
+        _, kept, dropped, res, _ = fit
         if dropped or res[kept].max() > max_residual:
             fit = None
     if fit is None:
         first = _best_start(known, ids, obj, xy, f, marker_map, n_starts)
         if first is None:
             return None
-        fit = _joint_fit(first, obj, xy, f, camera, ids, max_iter, max_residual)
-    best, keep, rejected, res = fit
+        fit = _joint_fit(first, obj, xy, f, ids, max_iter, max_residual)
+    best, keep, rejected, res, M = fit  # M: [J | r]^T [J | r] at best
     rejected = repeated + rejected
-    X = obj[keep].reshape(-1, 3)
-    M = levenberg_marquardt(best[None], X.T, xy[keep].reshape(-1, 2).T, f, max_iter=0)[2][0]  # [J | r]^T [J | r]
-    n = 2 * X.shape[0]
+    n = 8 * int(keep.sum())  # residuals: two per corner
     rms = float(np.sqrt(M[6, 6] / n))
     cov = _covariance(M, n, pixel_sigma)
     R = euler_to_matrix(best[3:])
@@ -262,24 +260,25 @@ def _best_start(known: list[MarkerDetection], ids: list[int], obj: FloatArray, x
     return np.array(starts[int(np.argmin(fit))])
 
 
-def _joint_fit(params: FloatArray, obj: FloatArray, xy: FloatArray, f: FloatArray, camera: Camera, ids: list[int],
-               max_iter: int, max_residual: float) -> tuple[FloatArray, NDArray[np.bool_], list[int], FloatArray]:
+def _joint_fit(params: FloatArray, obj: FloatArray, xy: FloatArray, f: FloatArray, ids: list[int],
+               max_iter: int, max_residual: float
+               ) -> tuple[FloatArray, NDArray[np.bool_], list[int], FloatArray, FloatArray]:
     """Gauss-Newton over all corners from ``params`` (6,), dropping the worst marker and
     fitting again while it disagrees with the rest: ``(params, kept, rejected ids, each
-    marker's RMS px)``."""
+    marker's RMS px, M)``, ``M = [J | r]^T [J | r]`` (7, 7) of the kept corners at ``params``."""
     keep = np.ones(len(ids), bool)
     rejected: list[int] = []
     params = params[None]
     while True:
         X = obj[keep].reshape(-1, 3)
-        p, sse = refine_params(params, X, xy[keep].reshape(-1, 2), fx=camera.fx, fy=camera.fy, max_iter=max_iter)
-        p = np.atleast_2d(p)
-        best = p[int(np.argmin(np.atleast_1d(sse)))]
+        p, sse, M = levenberg_marquardt(params, X.T, xy[keep].reshape(-1, 2).T, f, max_iter=max_iter)
+        pick = int(np.argmin(sse))
+        best = p[pick]
         res = _marker_rms(best, obj, xy, f)
         limit = max(max_residual, 3.0 * median(res[keep].tolist()))  # a few values: no numpy
         worst = int(np.argmax(np.where(keep, res, -1.0)))
         if keep.sum() <= 1 or res[worst] <= limit:
-            return best, keep, rejected, res
+            return best, keep, rejected, res, M[pick]
         keep[worst] = False
         rejected.append(ids[worst])
         params = best[None]
@@ -293,15 +292,7 @@ def _area(corners: FloatArray) -> float:
 def _marker_rms(params: FloatArray, obj: FloatArray, xy: FloatArray, f: FloatArray) -> FloatArray:
     """RMS reprojection error (px) of each marker's four corners under ``params`` (6,), or
     under each of several parameter vectors (S, 6): (M,) or (S, M)."""
-    params = np.asarray(params, np.float64)
-    R = euler_to_matrix(params)  # (..., 3, 3)
-    pts = obj.reshape(-1, 3)
-    q = pts @ np.swapaxes(R, -1, -2) + params[..., None, :3]  # (..., 4M, 3)
-    z = np.where(q[..., 2] > 1e-9, q[..., 2], np.nan)
-    uv = q[..., :2] / z[..., None]
-    d = (uv - xy.reshape(-1, 2)) * f[:, 0]
-    rms = np.sqrt(np.vecdot(d, d).reshape(*params.shape[:-1], -1, 4).mean(axis=-1))
-    return np.where(np.isfinite(rms), rms, np.inf)
+    return reprojection_rms(params, obj.reshape(-1, 3).T, xy.reshape(-1, 2).T, f)
 
 
 def _covariance(M: FloatArray, n_residuals: int, pixel_sigma: float | None) -> FloatArray | None:

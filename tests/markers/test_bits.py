@@ -132,9 +132,14 @@ def test_compiled_sampling_maps_are_the_numpy_maps():
         assert np.array_equal(mx, want_x, equal_nan=True) and np.array_equal(my, want_y, equal_nan=True)
     image = rng.integers(0, 256, (240, 320), dtype=np.uint8)
     thr = rng.uniform(60, 200, len(quads))
+    thr[3:9] = [128.0, -3.0, 255.0, 300.0, np.nan, 254.5]  # whole, out of range and NaN thresholds
     for n, per_side in ((6, 4), (10, 32)):  # 102400 points a marker: OpenCV's maps in pieces
-        a, b = (cell_white_fractions(image, quads[2:6], n, thr[2:6], per_side=per_side, native=e) for e in (True, False))
-        assert a.shape == (4, n, n) and np.array_equal(a, b)
+        a, b = (cell_white_fractions(image, quads[2:10], n, thr[2:10], per_side=per_side, native=e) for e in (True, False))
+        assert a.shape == (8, n, n) and np.array_equal(a, b)
+    # the compiled cell means (whole sums over the samples) are the numpy ones
+    a, b = (sample_cells(image, quads[2:], 6, per_side=4, native=e) for e in (True, False))
+    assert np.array_equal(a.cells, b.cells) and np.array_equal(a.ring, b.ring)
+    assert np.array_equal(a.samples, b.samples)
 
 
 def _quad(x0=10.0, x1=50.0):

@@ -18,6 +18,16 @@
  *     row) on each quad (K x 4 x 2 float64), K x P float32 each: bits.square_to_quad in double
  *     precision, cast to float, the points mapped in single precision as bits._map_points maps
  *     them, operation for operation: the same maps.
+ *
+ * And the sums over the samples read through those maps:
+ *
+ * sample_means(raw, K, C, m) -> means
+ *     raw: K x C x m uint8 (m samples of each of C cells); the K x C float64 means (the whole
+ *     sum over m, bits.sample_cells).
+ * white_fractions(values, threshold, K, n, per_side) -> fractions
+ *     values: K x (n per_side) x (n per_side) uint8, the samples of each of n x n cells in
+ *     per_side x per_side blocks; threshold: K float64. The K x n x n float64 share of each
+ *     cell's samples above its marker's threshold (bits.cell_white_fractions).
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -231,6 +241,65 @@ static PyObject *quad_maps(PyObject *self, PyObject *args) {
     return result;
 }
 
+static PyObject *sample_means(PyObject *self, PyObject *args) {
+    (void)self;
+    Py_buffer raw;
+    Py_ssize_t K, C, m;
+    if (!PyArg_ParseTuple(args, "y*nnn", &raw, &K, &C, &m)) return NULL;
+    PyObject *out = NULL;
+    if (K < 0 || C < 0 || m < 1 || raw.len != K * C * m) {
+        PyErr_SetString(PyExc_ValueError, "sample_means: expected K x C x m uint8 samples, m >= 1");
+    } else if ((out = PyBytes_FromStringAndSize(NULL, K * C * (Py_ssize_t)sizeof(double))) != NULL) {
+        const uint8_t *r = (const uint8_t *)raw.buf;
+        double *o = (double *)PyBytes_AS_STRING(out);
+        Py_BEGIN_ALLOW_THREADS
+        for (Py_ssize_t c = 0; c < K * C; c++) {
+            uint32_t sum = 0;
+            for (Py_ssize_t i = 0; i < m; i++) sum += r[c * m + i];
+            o[c] = (double)sum / (double)m;
+        }
+        Py_END_ALLOW_THREADS
+    }
+    PyBuffer_Release(&raw);
+    return out;
+}
+
+static PyObject *white_fractions(PyObject *self, PyObject *args) {
+    (void)self;
+    Py_buffer values, thr;
+    Py_ssize_t K, n, ps;
+    if (!PyArg_ParseTuple(args, "y*y*nnn", &values, &thr, &K, &n, &ps)) return NULL;
+    PyObject *out = NULL;
+    Py_ssize_t side = n * ps;
+    if (K < 0 || n < 1 || ps < 1 || values.len != K * side * side || thr.len != K * (Py_ssize_t)sizeof(double)) {
+        PyErr_SetString(PyExc_ValueError, "white_fractions: expected K x (n per_side)^2 uint8 values and K float64 thresholds");
+    } else if ((out = PyBytes_FromStringAndSize(NULL, K * n * n * (Py_ssize_t)sizeof(double))) != NULL) {
+        const uint8_t *v = (const uint8_t *)values.buf;
+        const double *t = (const double *)thr.buf;
+        double *o = (double *)PyBytes_AS_STRING(out);
+        Py_BEGIN_ALLOW_THREADS
+        for (Py_ssize_t k = 0; k < K; k++) {
+            /* a grey level v is above t when v >= cut: the least whole number above t (none: NaN) */
+            int cut = !(t[k] == t[k]) ? 256 : t[k] < 0.0 ? 0 : t[k] >= 255.0 ? 256 : (int)floor(t[k]) + 1;
+            const uint8_t *vk = v + k * side * side;
+            double *ok = o + k * n * n;
+            for (Py_ssize_t cy = 0; cy < n; cy++)
+                for (Py_ssize_t cx = 0; cx < n; cx++) {
+                    int count = 0;
+                    for (Py_ssize_t y = cy * ps; y < (cy + 1) * ps; y++) {
+                        const uint8_t *r = vk + y * side + cx * ps;
+                        for (Py_ssize_t x = 0; x < ps; x++) count += r[x] >= cut;
+                    }
+                    ok[cy * n + cx] = (double)count / (double)(ps * ps);
+                }
+        }
+        Py_END_ALLOW_THREADS
+    }
+    PyBuffer_Release(&values);
+    PyBuffer_Release(&thr);
+    return out;
+}
+
 static PyMethodDef methods[] = {
     {"read_samples", read_samples, METH_VARARGS,
      "read_samples(samples, ring, K, n, m, border, border_error_rate, min_contrast, min_quiet_zone)\n"
@@ -239,6 +308,10 @@ static PyMethodDef methods[] = {
     {"quad_maps", quad_maps, METH_VARARGS,
      "quad_maps(quads, K, uv, P) -> (mx, my)\n\n"
      "Image points (K x P float32 each) of unit-square points on each quad; see visloc.markers.bits._map_points."},
+    {"sample_means", sample_means, METH_VARARGS,
+     "sample_means(raw, K, C, m) -> K x C float64 means of m uint8 samples each; see visloc.markers.bits.sample_cells."},
+    {"white_fractions", white_fractions, METH_VARARGS,
+     "white_fractions(values, threshold, K, n, per_side) -> K x n x n float64; see visloc.markers.bits.cell_white_fractions."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -235,7 +235,10 @@ def sample_cells(gray: NDArray[np.uint8], quads: NDArray, n: int, *, per_side: i
         _GRIDS[n, per_side] = np.vstack([uv.T, np.ones(len(uv))]).astype(np.float32)
     uv1 = _GRIDS[n, per_side]  # (3, P): u, v, 1
     raw = _read_points(gray, q, uv1, native).reshape(len(q), -1, m)
-    vals = raw.sum(axis=2, dtype=np.uint32) / m  # whole sums: float64's, in two thirds of the time
+    if use_compiled(native, _cells, "visloc.markers._cells"):
+        vals = np.frombuffer(_cells.sample_means(raw, len(q), raw.shape[1], m), np.float64).reshape(len(q), -1)
+    else:
+        vals = raw.sum(axis=2, dtype=np.uint32) / m  # whole sums: float64's, in two thirds of the time
     samples = raw[:, : n * n].reshape(len(q), n, n, m)
     return CellSample(vals[:, : n * n].reshape(-1, n, n), vals[:, n * n :], samples)
 
@@ -353,6 +356,9 @@ def cell_white_fractions(gray: NDArray[np.uint8], quads: NDArray, n: int, thresh
     uv1 = _area_grid(n, per_side, float(margin))
     side = n * per_side
     vals = _read_points(gray, q, uv1, native)
+    if use_compiled(native, _cells, "visloc.markers._cells"):
+        return np.frombuffer(_cells.white_fractions(vals, np.ascontiguousarray(t.reshape(-1), np.float64), len(q), n,
+                                                    per_side), np.float64).reshape(len(q), n, n)
     white = vals > t.reshape(-1, 1)
     # the count of each cell's samples, one axis at a time (a third of mean(axis=(2, 4))'s time)
     count = white.view(np.uint8).reshape(len(q), n, per_side, side).sum(axis=2, dtype=np.uint32)

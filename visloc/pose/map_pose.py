@@ -82,10 +82,12 @@ class MapPose:
         r20, r21, r22 = R[2].tolist()
         norm = math.hypot(r21, r22)
         cos_phi, sin_phi = (r22 / norm, r21 / norm) if norm > 0.0 else (1.0, 0.0)
-        axes = np.array([[1.0, 0.0, 0.0], [0.0, cos_phi, -sin_phi], [r20, r21, r22]])
+        u0, u1, u2 = u.tolist()
         J = np.empty((3, 6))
         J[:, :3] = -R.T
-        J[:, 3:] = np.cross(axes, u).T
+        columns = [[a1 * u2 - a2 * u1, a2 * u0 - a0 * u2, a0 * u1 - a1 * u0]  # a_i x u, as np.cross has it
+                   for a0, a1, a2 in ((1.0, 0.0, 0.0), (0.0, cos_phi, -sin_phi), (r20, r21, r22))]
+        J[:, 3:] = np.array(columns).T
         out = J @ cov @ J.T
         return 0.5 * (out + out.T)
 

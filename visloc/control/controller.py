@@ -233,6 +233,11 @@ class Controller:
         ndarray (4,)
             Thrust (N) and body torques (N m), feed-forward ``T0 = m g`` included.
         """
+        return np.array(self._command_values(state, setpoint, dt, reference))
+
+    def _command_values(self, state: ArrayLike, setpoint: ArrayLike, dt: float,
+                        reference: tuple[ArrayLike, ArrayLike] | None) -> list[float]:
+        """:meth:`command`'s ``u`` as 4 floats (its arguments checked as it says)."""
         step = check_real(dt, "dt", nonneg=True)
         s = as_array(state, "state", (12,)).tolist()
         x = _error_values(s, as_array(setpoint, "setpoint", (4,)).tolist())
@@ -247,7 +252,7 @@ class Controller:
         self._integral = np.array(integral)
         u, _ = self._inputs(x, integral)
         u[0] += thrust_ff
-        return np.array(u)
+        return u
 
     def pwm(self, state: ArrayLike, setpoint: ArrayLike, dt: float, *,
             reference: tuple[ArrayLike, ArrayLike] | None = None) -> PwmResult:
@@ -265,6 +270,6 @@ class Controller:
             :func:`visloc.model.pwm_from_inputs` gives them with the mean-coefficient mixer
             (whose inverse the controller keeps).
         """
-        u = self.command(state, setpoint, dt, reference=reference).tolist()
+        u = self._command_values(state, setpoint, dt, reference)
         bar = [sum(map(operator.mul, row, u)) for row in self._gamma_inv_rows]
         return pwm_from_bar(np.array(bar), self.params.k)  # report eq. (4.6): sqrt(Gamma^-1 u) - k

@@ -213,7 +213,7 @@ class BottomCamera:
         if self._grain is None:
             g = np.rint(self.rng.normal(0.0, self.noise_sigma, (2 * h, 2 * w)))
             self._grain = np.clip(g, 0, 255).astype(np.uint8), np.clip(-g, 0, 255).astype(np.uint8)
-        y, x = (int(v) for v in self.rng.integers(0, (h + 1, w + 1)))
+        y, x = int(self.rng.integers(0, h + 1)), int(self.rng.integers(0, w + 1))  # integers(0, (h + 1, w + 1))'s draws
         light, dark = (part[y : y + h, x : x + w] for part in self._grain)
         # uint8 adds and subtracts saturate: the image plus the noise clipped to 0-255, as one add
         # of signed noise would give (one of the two parts is 0 at each pixel), in a tenth of its time

@@ -262,16 +262,19 @@ STAGES = {"blur": "2 blur", "threshold": "3 threshold", "find_candidates": "4-5 
           "cell_white_fractions": "9 area read (confidence)", "decode": "10 dictionary"}
 
 
-def stage_times(size, sets, seed0, rounds=2):
+def stage_times(size, sets, seed0, rounds=3):
     """Where visloc's time goes: ms per frame in each stage function of the detector (wrapped
-    with a timer for this run only) over the same rendered frames as :func:`run_rendered`.
-    All passes run on the calling thread here, so that the stage times add up."""
+    with a timer for this run only) over the same rendered frames as :func:`run_rendered`:
+    the split of the median of ``rounds`` passes through the frames (one slow spell of the
+    host moves a mean). All passes run on the calling thread here, so that the stage times
+    add up."""
     import visloc.markers.detector as det_mod
 
     images = [random_scene(np.random.default_rng([seed0, size[0], list(SETS).index(name), i]), size=size,
                            dictionary="DICT_4X4_50", difficulty=name, camera=True).image
               for name, n in sets.items() for i in range(n)]
     spent = dict.fromkeys(STAGES, 0.0)
+    per_round = []
     originals = {name: getattr(det_mod, name) for name in STAGES}
 
     def timed(name, fn):
@@ -289,20 +292,22 @@ def stage_times(size, sets, seed0, rounds=2):
         det_mod._THREAD_MAX_PIXELS = 0
         for name, fn in originals.items():
             setattr(det_mod, name, timed(name, fn))
-        t0 = time.perf_counter()
         for _ in range(rounds):
+            spent.update(dict.fromkeys(STAGES, 0.0))
+            t0 = time.perf_counter()
             for img in images:
                 vl.detect(img)
-        total = time.perf_counter() - t0
+            total = time.perf_counter() - t0
+            n = len(images)
+            row = {STAGES[k]: 1e3 * v / n for k, v in spent.items()}
+            row["rest (Python glue, duplicates, results)"] = 1e3 * (total - sum(spent.values())) / n
+            row["total"] = 1e3 * total / n
+            per_round.append(row)
     finally:
         det_mod._THREAD_MAX_PIXELS = threaded
         for name, fn in originals.items():
             setattr(det_mod, name, fn)
-    n = rounds * len(images)
-    out = {STAGES[k]: 1e3 * v / n for k, v in spent.items()}
-    out["rest (Python glue, duplicates, results)"] = 1e3 * (total - sum(spent.values())) / n
-    out["total"] = 1e3 * total / n
-    return out
+    return sorted(per_round, key=lambda row: row["total"])[len(per_round) // 2]  # the median round: parts add up
 
 
 def _plain(o):
@@ -340,8 +345,9 @@ def markdown(result) -> str:
                              f"{fmt(r['corner_rms_px'])} |")
     if result.get("stages"):
         sizes = list(result["stages"])
-        lines.append("\n**Where visloc's time goes** (mean ms per frame in each stage over the same camera-like "
-                     "DICT_4X4_50 frames, every pass on one thread; the timers add a little)\n")
+        lines.append("\n**Where visloc's time goes** (ms per frame in each stage over the same camera-like "
+                     "DICT_4X4_50 frames, the pass through them with the median total of 3, every pass on one thread; "
+                     "the timers add a little)\n")
         lines.append("| stage | " + " | ".join(sizes) + " |")
         lines.append("|---|" + "---|" * len(sizes))
         for stage in result["stages"][sizes[0]]:

@@ -12,7 +12,7 @@
   Kalman filter and controller: position RMS from the set point, estimate error, speed.
 - ``hover-vision`` with the camera's true pose as every fix (no marker vision), the frames
   rendered or not: the loop's own speed, the ceiling of the vision rows' ``x real time``.
-  The five hover-vision rows run three times each, interleaved; their speed is the median.
+  Every row runs three times, interleaved; its speed is the median.
 - ``sidestep`` with the motors drawn at +-1 and +-2 sigma (4 seeds each).
 - ``--sweep``: the grid of position / attitude loop specifications that chose the defaults
   of :class:`visloc.control.ControlSpecs` (side step and push on the non-linear model, the
@@ -57,7 +57,7 @@ from visloc.types import Pose
 
 ROOT = Path(__file__).resolve().parents[1]
 P = replace(ARDRONE2, arm=0.125)
-ROUNDS = 3  # interleaved runs of each hover-vision row; its x real time is their median
+ROUNDS = 3  # interleaved runs of each row; its x real time is their median
 
 
 def opencv_localizer():
@@ -138,10 +138,9 @@ def _row(name, r):
 
 
 def scenarios(quick: bool) -> list[dict]:
-    rows = []
-    for name in ("hover", "sidestep", "push"):
-        rows.append(_row(name, simulate(name)))
-        print(rows[-1], file=sys.stderr)
+    rows = _median_speed({name: (lambda name=name: simulate(name)) for name in ("hover", "sidestep", "push")}, ROUNDS)
+    for row in rows:
+        print(row, file=sys.stderr)
     seconds = 10.0 if quick else None
     runs = {
         "hover-vision (visloc)": lambda: simulate("hover-vision", seed=1, seconds=seconds, redetect_every=10),
@@ -155,27 +154,29 @@ def scenarios(quick: bool) -> list[dict]:
     rows += _median_speed(runs, ROUNDS)
     for row in rows[-len(runs):]:
         print(row, file=sys.stderr)
-    for sigma in (1.0, 2.0):
-        for seed in range(1 if quick else 4):
-            rows.append(_row(f"sidestep sigma={sigma:g} seed={seed}", simulate("sidestep", sigma=sigma, seed=seed)))
+    rows += _median_speed({f"sidestep sigma={sigma:g} seed={seed}":
+                           (lambda sigma=sigma, seed=seed: simulate("sidestep", sigma=sigma, seed=seed))
+                           for sigma in (1.0, 2.0) for seed in range(1 if quick else 4)}, ROUNDS)
     # issue 20: a 5 m side step along the minimum-jerk trajectory with feed-forward, and as the
-    # report's plain set-point step (settling counted from the trajectory's end; band 5 % = 25 cm)
-    for smooth in (True, False):
-        label = "step 5 m, trajectory + feed-forward" if smooth else "step 5 m, plain set point"
-        rows.append(_row(label, simulate(step_scenario(5.0, smooth=smooth))))
-        print(rows[-1], file=sys.stderr)
-    # ... and the plain step without the report's torque bound (§4.4): its controller before the fix
-    rows.append(_row("step 5 m, plain set point, torques unbounded", simulate(step_scenario(5.0, smooth=False),
-                                                                               max_tilt=math.inf)))
+    # report's plain set-point step (settling counted from the trajectory's end; band 5 % = 25 cm);
+    # and the plain step without the report's torque bound (§4.4): its controller before the fix
+    steps = {"step 5 m, trajectory + feed-forward": lambda: simulate(step_scenario(5.0, smooth=True)),
+             "step 5 m, plain set point": lambda: simulate(step_scenario(5.0, smooth=False)),
+             "step 5 m, plain set point, torques unbounded":
+                 lambda: simulate(step_scenario(5.0, smooth=False), max_tilt=math.inf)}
+    rows += _median_speed(steps, ROUNDS)
+    for row in rows[-len(steps):]:
+        print(row, file=sys.stderr)
     # issue 20: the 1.25 m square at 0.5 m/s on visloc's vision, the motors drawn at +-2 sigma
     square = square_scenario(1.25, speed=0.5, vision=True)
-    for seed in range(2 if quick else 8):
-        rows.append(_row(f"square 1.25 m on vision, sigma=2 seed={seed}", simulate(square, sigma=2.0, seed=seed)))
-        print(rows[-1], file=sys.stderr)
     eight = figure8_scenario(1.2, speed=0.5, vision=True)
-    for seed in range(1 if quick else 2):
-        rows.append(_row(f"figure8 1.2 m on vision, sigma=2 seed={seed}", simulate(eight, sigma=2.0, seed=seed)))
-        print(rows[-1], file=sys.stderr)
+    shapes = {**{f"square 1.25 m on vision, sigma=2 seed={seed}":
+                 (lambda seed=seed: simulate(square, sigma=2.0, seed=seed)) for seed in range(2 if quick else 8)},
+              **{f"figure8 1.2 m on vision, sigma=2 seed={seed}":
+                 (lambda seed=seed: simulate(eight, sigma=2.0, seed=seed)) for seed in range(1 if quick else 2)}}
+    rows += _median_speed(shapes, ROUNDS)
+    for row in rows[-len(shapes):]:
+        print(row, file=sys.stderr)
     return rows
 
 
@@ -216,8 +217,8 @@ def markdown(result) -> str:
         "visloc's front end: the markers followed from frame to frame, the map's markers in the last fix's view "
         "joining at once, a full detection only when following fails, unless said; the two "
         "'true pose' rows take the marker vision out, each fix the camera's true pose, to show the loop's own "
-        f"speed with the frames rendered and without; each hover-vision row's x real time is the median of "
-        f"{ROUNDS} interleaved runs of the same flight, their range in brackets). Settling: 5 % band "
+        f"speed with the frames rendered and without; each row's x real time is the median of {ROUNDS} "
+        "interleaved runs of the same flight, their range in brackets). Settling: 5 % band "
         "(5 cm; 25 cm for the 5 m steps, counted from the trajectory's end); height dip: largest height "
         "loss after the step or push; for the squares and eights, pos RMS is the tracking error from the moving "
         "reference."), "",

@@ -405,7 +405,7 @@ def write_bag(path: str | os.PathLike[str], frames: list[NDArray[np.uint8]], tim
     Returns
     -------
     Path
-        ``path``.
+        ``path``, the recording written.
 
     Raises
     ------

@@ -16,20 +16,10 @@ from numpy.typing import NDArray
 
 from visloc.boards.charuco import CharucoBoard
 from visloc.markers.dictionary import load_dictionary
+from visloc.synth import markers as _render
 from visloc.synth._checks import check_camera, check_size
 from visloc.synth.camera import CameraEffects, distort_points, monotonic_radius
-from visloc.synth.markers import (
-    VISIBLE_MARGIN,
-    MarkerRender,
-    _check_degradations,
-    _composite_exact,
-    _finish,
-    _ideal_background,
-    _marker_truth,
-    _plane_polygons,
-    _within_radius,
-    project_points,
-)
+from visloc.synth.markers import VISIBLE_MARGIN, MarkerRender, project_points
 from visloc.types import Pose
 
 __all__ = ["CharucoRender", "render_charuco"]
@@ -104,25 +94,25 @@ def render_charuco(K: FloatArray, size: tuple[int, int], pose: Pose, board: Char
         raise TypeError(f"pose must be a visloc.types.Pose, got {type(pose).__name__}")
     k = check_camera(K)
     w, h = check_size(size)
-    deg, gen = _check_degradations(camera, rng, blur_sigma=blur_sigma, motion_blur=0.0, motion_angle=0.0,
+    deg, gen = _render._check_degradations(camera, rng, blur_sigma=blur_sigma, motion_blur=0.0, motion_angle=0.0,
                                    noise_sigma=noise_sigma, gain=1.0, gradient=0.0, jpeg_quality=None)
     dic = load_dictionary(board.dictionary)
     face = Pose(np.asarray(pose.R, float) @ _FLIP, np.asarray(pose.t, float))  # the printed face's frame
-    canvas, _, k_ideal = _ideal_background(k, (w, h), None, camera, gen)
+    canvas, _, k_ideal = _render._ideal_background(k, (w, h), None, camera, gen)
     s, L = board.square_length, board.marker_length
     centres = board.marker_corners.mean(axis=1) @ _FLIP  # face frame: y up
-    markers = [_marker_truth(k, (w, h), camera, int(mid), Pose(face.R, face.R @ c + face.t), L)
+    markers = [_render._marker_truth(k, (w, h), camera, int(mid), Pose(face.R, face.R @ c + face.t), L)
                for mid, c in zip(board.marker_ids.tolist(), centres, strict=True)]
     facing = bool(np.dot(face.t, face.R[:, 2]) < 0.0)
     if facing:
         outer, polys, weights = _board_polygons(board, dic, centres)
-        _composite_exact(canvas, k_ideal, face, outer, polys, weights, 1e-6 * s)
+        _render._composite_exact(canvas, k_ideal, face, outer, polys, weights, 1e-6 * s)
     corners, visible = _corner_truth(k, (w, h), camera, pose, board.chessboard_corners)
     params = {"board": {"squares_x": board.squares_x, "squares_y": board.squares_y, "square_length": s,
                         "marker_length": L, "dictionary": board.dictionary, "first_id": board.first_id,
                         "legacy": board.legacy},
               "board_rvec": [float(v) for v in pose.rvec], "board_tvec": [float(v) for v in pose.t]}
-    rendered = _finish(canvas, k, k_ideal, (w, h), markers, dic.name, params, camera, gen, **deg)
+    rendered = _render._finish(canvas, k, k_ideal, (w, h), markers, dic.name, params, camera, gen, **deg)
     return CharucoRender(rendered, corners, visible & facing, pose)
 
 
@@ -138,7 +128,7 @@ def _board_polygons(board: CharucoBoard, dic, centres: FloatArray):
         polys.append(square * (1.0, -1.0))
         weights.append(-1.0)
     for mid, centre in zip(board.marker_ids.tolist(), centres, strict=True):
-        _, tag, tag_w = _plane_polygons(dic.bits[mid], board.marker_length, 0.0)
+        _, tag, tag_w = _render._plane_polygons(dic.bits[mid], board.marker_length, 0.0)
         polys.extend(p + centre[:2] for p in tag[1:])
         weights.extend(tag_w[1:])
     return outer, polys, weights
@@ -151,7 +141,7 @@ def _corner_truth(k: FloatArray, size: tuple[int, int], camera: CameraEffects | 
     uv = project_points(k, pose, points)
     in_front = pose.apply(points)[:, 2] > 0
     if camera is not None:
-        one_to_one = np.array([_within_radius(p[None], k, monotonic_radius(camera.k1, camera.k2)) for p in uv])
+        one_to_one = np.array([_render._within_radius(p[None], k, monotonic_radius(camera.k1, camera.k2)) for p in uv])
         uv = distort_points(uv, k, camera.k1, camera.k2)
         in_front &= one_to_one
     inside = np.isfinite(uv).all(axis=1) & (uv >= VISIBLE_MARGIN - 0.5).all(axis=1) & (

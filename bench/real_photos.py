@@ -44,7 +44,7 @@ them. Timing: ``--rounds`` rounds, every image with each method in turn
 
 Usage::
 
-    python bench/real_photos.py [--rounds 7] [--quick] [--out bench/results]
+    python bench/real_photos.py [--rounds 15] [--quick] [--out bench/results]
 
 Writes ``real_photos.json`` and ``real_photos.md``.
 """
@@ -497,7 +497,7 @@ def _plain(o):
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--rounds", type=int, default=7)
+    ap.add_argument("--rounds", type=int, default=15)
     ap.add_argument("--quick", action="store_true", help="one round, 6 marker-free photos (a smoke run)")
     ap.add_argument("--out", default=str(ROOT / "bench/results"))
     args = ap.parse_args(argv)

@@ -57,6 +57,7 @@ class Closing:
     """Base class: ``with obj:`` calls ``obj.close()`` on the way out, even on errors."""
 
     def close(self) -> None:  # pragma: no cover - overridden
+        """Release what the object holds (a subclass's own; here it raises NotImplementedError)."""
         raise NotImplementedError
 
     def __enter__(self) -> Self:

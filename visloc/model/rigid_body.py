@@ -135,10 +135,22 @@ def euler_rate_matrix(lam: ArrayLike) -> FloatArray:
 
 
 def euler_rate_values(lam: list[float], omega: list[float]) -> list[float]:
-    """``Q(lambda) omega`` (report eq. 2.7) on Python floats, without argument checks: the
-    Euler angle rates (rad/s) of body rates ``omega = [p, q, r]`` (rad/s) at angles ``lam =
-    [phi, theta, psi]`` (rad), as :func:`rhs_values` computes them (an attitude integrated
-    from a gyro at every step of :mod:`visloc.sim`'s loop)."""
+    """``Q(lambda) omega`` (report eq. 2.7) on Python floats, without argument checks, as
+    :func:`rhs_values` computes it (an attitude integrated from a gyro at every step of
+    :mod:`visloc.sim`'s loop).
+
+    Parameters
+    ----------
+    lam : list of 3 floats
+        The Euler angles ``[phi, theta, psi]``, rad (``theta`` away from +-90 deg).
+    omega : list of 3 floats
+        The body rates ``[p, q, r]``, rad/s.
+
+    Returns
+    -------
+    list of 3 floats
+        The Euler angle rates ``[phi_dot, theta_dot, psi_dot]``, rad/s.
+    """
     phi, theta = lam[0], lam[1]
     p, q, r = omega
     cf, sf = math.cos(phi), math.sin(phi)

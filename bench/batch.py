@@ -127,7 +127,7 @@ def markdown(r: dict) -> str:
     if o:
         frame = 1e3 * r["seconds"]["visloc batch, 1 worker"] / (r["frames_per_recording"] * r["recordings"])
         extra = o["ms_per_task"] - 2 * frame  # beyond the two frames' detection
-        lines += ["", (f"Per task: {o['tasks']} two-frame videos on one warm worker, {o.get('rounds', 1)} times, take "
+        lines += ["", (f"Per task: {o['tasks']} two-frame videos on one warm worker, {o['rounds']} times, take "
                        f"{fmt(o['ms_per_task'], 1)} ms per task (median round; the task itself {fmt(o['ms_task_body_median'], 1)} ms, median): about "
                        f"{fmt(extra, 1)} ms beyond detection, so a recording of "
                        f"{fmt(extra / (0.02 * frame), 0)} frames or more (at {fmt(frame, 2)} ms per frame in a worker) "

@@ -28,6 +28,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 from _results import fmt, write_results
+from refine_window import corner_errors
 
 from visloc.boards import detect_charuco
 from visloc.markers import MarkerDetector
@@ -43,21 +44,6 @@ BARREL = CameraEffects(k1=-0.15, full_well=None, read_noise=0.0, jpeg_quality=No
 def _scenes(difficulty: str, n: int, camera, seed: int) -> list:
     return [random_scene(np.random.default_rng([seed, k]), size=SIZE, dictionary="DICT_4X4_50",
                          difficulty=difficulty, camera=camera) for k in range(n)]
-
-
-def corner_errors(detector: MarkerDetector, scenes: list) -> dict:
-    """Corner errors (px) of the detections whose id is a visible marker's, against the truth."""
-    err, found, visible = [], 0, 0
-    for scene in scenes:
-        truth = {m.id: m.corners for m in scene.markers if m.visible}
-        visible += len(truth)
-        for d in detector.detect(scene.image):
-            if d.id in truth:
-                found += 1
-                err.extend(np.linalg.norm(d.corners - truth[d.id], axis=1).tolist())
-    e = np.array(err)
-    return {"found": found, "visible": visible, "rms_px": float(np.sqrt(np.mean(e**2))) if len(e) else None,
-            "median_px": float(np.median(e)) if len(e) else None}
 
 
 def borders(scenes: list) -> dict:
@@ -84,8 +70,7 @@ def saddle_time(views: int = 12, rounds: int = 3) -> dict:
                 detect_charuco(img, BOARD, method=method)
             spent[method].append((time.perf_counter() - t0) / len(images))
     out = {m: 1e3 * float(np.median(v)) for m, v in spent.items()}
-    out["ratio"] = out["saddle"] / out["edges"]
-    return out
+    return {**out, "ratio": out["saddle"] / out["edges"], "views": views, "rounds": rounds}
 
 
 def run(n: int) -> dict:
@@ -116,10 +101,11 @@ def markdown(r: dict) -> str:
         lines += [f"**{title}** ({r['scenes']} scenes; corner error against the truth)", "",
                   "| variant | found / visible | corner RMS px | corner median px |", "|---|---|---|---|"]
         for name, e in r[key].items():
-            lines.append(f"| {name} | {e['found']}/{e['visible']} | {fmt(e['rms_px'])} | {fmt(e['median_px'])} |")
+            lines.append(f"| {name} | {e['found']}/{e['markers']} | {fmt(e['rms_px'])} | {fmt(e['median_px'])} |")
         lines.append("")
     c = r["charuco_ms_per_view"]
-    lines.append(f"**ChArUco corners** (12 calibration views, 1280x720, median of 3 interleaved rounds): "
+    lines.append(f"**ChArUco corners** ({c['views']} calibration views, 1280x720, median of {c['rounds']} interleaved "
+                 "rounds): "
                  f"{fmt(c['edges'], 1)} ms per view with the edge fit (default), {fmt(c['saddle'], 1)} ms with "
                  f"`method=\"saddle\"` ({fmt(c['ratio'], 2)}x).")
     return "\n".join(lines) + "\n"

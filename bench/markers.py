@@ -274,7 +274,7 @@ def stage_times(size, sets, seed0, rounds=3):
                            dictionary="DICT_4X4_50", difficulty=name, camera=True).image
               for name, n in sets.items() for i in range(n)]
     spent = dict.fromkeys(STAGES, 0.0)
-    per_round = []
+    per_round, n = [], len(images)
     originals = {name: getattr(det_mod, name) for name in STAGES}
 
     def timed(name, fn):
@@ -298,7 +298,6 @@ def stage_times(size, sets, seed0, rounds=3):
             for img in images:
                 vl.detect(img)
             total = time.perf_counter() - t0
-            n = len(images)
             row = {STAGES[k]: 1e3 * v / n for k, v in spent.items()}
             row["rest (Python glue, duplicates, results)"] = 1e3 * (total - sum(spent.values())) / n
             row["total"] = 1e3 * total / n

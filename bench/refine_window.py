@@ -54,14 +54,14 @@ def run(n: int, seed: int = 300) -> dict:
                                    camera=True, dictionary=dictionary) for i in range(n)]
             row = {"size": list(size), "dictionary": dictionary, "set": name, "by_radius": {}}
             for column, det in detectors.items():
-                row["by_radius"][column] = _errors(det, scenes)
+                row["by_radius"][column] = corner_errors(det, scenes)
             rows.append(row)
     return {"machine": {"python": sys.version.split()[0], "opencv": cv2.__version__, "numpy": np.__version__,
                         "platform": platform.platform()}, "scenes_per_set": n, "seed": seed, "radii": list(SETTINGS),
             "rows": rows, "coarse": run_coarse(n)}
 
 
-def _errors(det: MarkerDetector, scenes: list) -> dict:
+def corner_errors(det: MarkerDetector, scenes: list) -> dict:
     """Recall and corner errors (median, RMS, px) of ``det`` on the markers wholly in view of
     ``scenes`` (as the markers bench counts them), and how many found markers have a corner
     more than :data:`GROSS` px off."""
@@ -94,7 +94,7 @@ def run_coarse(n: int) -> list[dict]:
         print(f"refine_window: wide first refinement, 1280x720 dark, seed {seed} ...", file=sys.stderr, flush=True)
         scenes = [random_scene(np.random.default_rng([seed, 1280, i, 4]), size=(1280, 720), difficulty="dark",
                                camera=True) for i in range(n)]
-        rows.append({"seed": seed, "by_setting": {k: _errors(det, scenes) for k, det in detectors.items()}})
+        rows.append({"seed": seed, "by_setting": {k: corner_errors(det, scenes) for k, det in detectors.items()}})
     return rows
 
 

@@ -115,7 +115,8 @@ def ceiling(seconds: float | None, render: bool) -> dict:
 
 def _median_speed(runs: dict, rounds: int) -> list[dict]:
     """A row per run, its ``x real time`` the median of ``rounds`` interleaved runs (the same
-    seeded flight each time: every other figure must come out the same)."""
+    seeded flight each time: every other figure must come out the same); each row is printed
+    to stderr as it is made."""
     rows: dict[str, list[dict]] = {name: [] for name in runs}
     for k in range(rounds):
         for name in (list(runs) if k % 2 == 0 else list(runs)[::-1]):
@@ -126,6 +127,7 @@ def _median_speed(runs: dict, rounds: int) -> list[dict]:
         assert all(r == same[0] for r in same), f"{name}: the repeated runs differ"
         out.append({**rs[0], "realtime_factor": float(np.median([r["realtime_factor"] for r in rs])),
                     "realtime_factor_runs": [r["realtime_factor"] for r in rs]})
+        print(out[-1], file=sys.stderr)
     return out
 
 
@@ -139,8 +141,6 @@ def _row(name, r):
 
 def scenarios(quick: bool) -> list[dict]:
     rows = _median_speed({name: (lambda name=name: simulate(name)) for name in ("hover", "sidestep", "push")}, ROUNDS)
-    for row in rows:
-        print(row, file=sys.stderr)
     seconds = 10.0 if quick else None
     runs = {
         "hover-vision (visloc)": lambda: simulate("hover-vision", seed=1, seconds=seconds, redetect_every=10),
@@ -152,8 +152,6 @@ def scenarios(quick: bool) -> list[dict]:
         "hover-vision, the true pose as each fix: no render, no marker vision": lambda: ceiling(seconds, False),
     }
     rows += _median_speed(runs, ROUNDS)
-    for row in rows[-len(runs):]:
-        print(row, file=sys.stderr)
     rows += _median_speed({f"sidestep sigma={sigma:g} seed={seed}":
                            (lambda sigma=sigma, seed=seed: simulate("sidestep", sigma=sigma, seed=seed))
                            for sigma in (1.0, 2.0) for seed in range(1 if quick else 4)}, ROUNDS)
@@ -165,8 +163,6 @@ def scenarios(quick: bool) -> list[dict]:
              "step 5 m, plain set point, torques unbounded":
                  lambda: simulate(step_scenario(5.0, smooth=False), max_tilt=math.inf)}
     rows += _median_speed(steps, ROUNDS)
-    for row in rows[-len(steps):]:
-        print(row, file=sys.stderr)
     # issue 20: the 1.25 m square at 0.5 m/s on visloc's vision, the motors drawn at +-2 sigma
     square = square_scenario(1.25, speed=0.5, vision=True)
     eight = figure8_scenario(1.2, speed=0.5, vision=True)
@@ -175,8 +171,6 @@ def scenarios(quick: bool) -> list[dict]:
               **{f"figure8 1.2 m on vision, sigma=2 seed={seed}":
                  (lambda seed=seed: simulate(eight, sigma=2.0, seed=seed)) for seed in range(1 if quick else 2)}}
     rows += _median_speed(shapes, ROUNDS)
-    for row in rows[-len(shapes):]:
-        print(row, file=sys.stderr)
     return rows
 
 

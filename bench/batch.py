@@ -105,13 +105,9 @@ def task_overhead(work: Path, tasks: int = 30, rounds: int = 3) -> dict:
 
 
 def _one_worker(overhead: float) -> str:
-    """The one-worker run against the serial loop, in words that read right either way."""
-    if abs(overhead) < 0.0005:
-        return "one worker took as long as the serial loop, Dask's start-up included"
-    if overhead >= 0:
-        return f"one worker costs {fmt(100 * overhead, 1)} % over the serial loop (Dask's start-up included)"
-    return (f"one worker took {fmt(-100 * overhead, 1)} % less time than the serial loop, Dask's start-up included "
-            "(within the host's speed swings)")
+    """The one-worker run against the serial loop, as a ratio of their times (a percentage of
+    their small difference would swing with the host from run to run)."""
+    return f"one worker took {fmt(1.0 + overhead, 2)} of the serial loop's time, Dask's start-up included"
 
 
 def markdown(r: dict) -> str:

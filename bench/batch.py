@@ -104,12 +104,6 @@ def task_overhead(work: Path, tasks: int = 30, rounds: int = 3) -> dict:
             "ms_task_body_median": 1e3 * float(np.median(bodies))}
 
 
-def _one_worker(overhead: float) -> str:
-    """The one-worker run against the serial loop, as a ratio of their times (a percentage of
-    their small difference would swing with the host from run to run)."""
-    return f"one worker took {fmt(1.0 + overhead, 2)} of the serial loop's time, Dask's start-up included"
-
-
 def markdown(r: dict) -> str:
     lines = [(f"**visloc batch** ({r['recordings']} recordings of {r['frames_per_recording']} rendered 640x480 frames, "
              f"`detect`; median of {r['rounds']} alternating rounds, wall time)"), "",
@@ -118,7 +112,7 @@ def markdown(r: dict) -> str:
     for k, v in r["seconds"].items():
         lines.append(f"| {k} | {fmt(v, 2)} | {fmt(serial / v, 2)} |")
     lines += ["", (f"Two workers reach {fmt(r['batch_vs_processes'], 2)} of the two plain processes' speed-up; "
-                  f"{_one_worker(r['overhead_1_worker'])}; detection {fmt(r['ms_per_frame_serial'], 2)} ms per frame in the serial loop.")]
+                  f"one worker took {fmt(1.0 + r['overhead_1_worker'], 2)} of the serial loop's time, Dask's start-up included; detection {fmt(r['ms_per_frame_serial'], 2)} ms per frame in the serial loop.")]
     o = r.get("overhead")
     if o:
         frame = 1e3 * r["seconds"]["visloc batch, 1 worker"] / (r["frames_per_recording"] * r["recordings"])

@@ -42,7 +42,7 @@ detections are counted unfiltered (no hamming / decision-margin threshold), as i
 them. Timing: ``--rounds`` rounds, every image with each method in turn
 (alternating order); the table shows each image's best round (the least disturbed one: on
 this 2-core machine OpenCV's two threads sometimes share one core, which makes its times
-bimodal, 4 or 6.5 ms on one photo, and the median flip between the modes from run to run),
+bimodal, 4.0 or 6.4 ms on one photo, and the median flip between the modes from run to run),
 and ``ms total`` sums those bests. The JSON keeps every round and the median.
 
 Usage::

@@ -9,7 +9,8 @@ The recordings: one rendered 640x480 marker video (``visloc render markers --vid
 ``--recordings`` times. Every configuration runs ``visloc detect REC --out ... --quiet`` per
 recording: a serial loop of processes (a shell loop), two processes side by side (half the
 recordings each), ``visloc batch`` with 1 and with 2 local workers. Configurations alternate
-over rounds; the median wall time of each is kept.
+over rounds; the median wall time of each is kept. Each run starts when the host runs at its
+normal speed (``_timing.Steady``: the host has slow spells of a few seconds).
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 from _results import fmt, write_results
+from _timing import steady
 
 ROOT = Path(__file__).resolve().parents[1]
 VISLOC = [sys.executable, "-m", "visloc"]
@@ -65,6 +67,7 @@ def run(frames: int, recordings: int, rounds: int, work: Path) -> dict:
         for name in (list(configs) if r % 2 == 0 else list(configs)[::-1]):
             out = work / f"out_{r}_{abs(hash(name))}"
             out.mkdir()
+            steady().wait()
             t0 = time.perf_counter()
             configs[name](out)
             spent[name].append(time.perf_counter() - t0)
@@ -96,6 +99,7 @@ def task_overhead(work: Path, tasks: int = 30, rounds: int = 3) -> dict:
         run_batch("detect", recs[:2], "", work / "warm", scheduler=cluster.scheduler_address, force=True)
         walls, bodies = [], []
         for _ in range(rounds):
+            steady().wait()
             t0 = time.perf_counter()
             res = run_batch("detect", recs, "", work / "tiny_out", scheduler=cluster.scheduler_address, force=True)
             walls.append(time.perf_counter() - t0)
@@ -136,6 +140,7 @@ def main(argv=None) -> int:
         result = run(args.frames, args.recordings, args.rounds, Path(work))
         result["overhead"] = task_overhead(Path(work))
     result["machine"] = {"python": sys.version.split()[0], "platform": platform.platform()}
+    result["steady"] = steady().summary()
     write_results(args.out, "batch", result, markdown(result))
     return 0
 

@@ -27,8 +27,10 @@ at 1.5-2.5 m: the image moves less than a pixel per frame, the hover regime); an
 shadow (a soft band of 40 % less light drifting 0.5 px per frame over the ground). Each pair's
 velocity is scaled by the height when its second frame was taken (``ground_velocity``'s
 convention). Timing is interleaved per pair (each method in turn, several rounds) and covers
-image motion plus velocity. Usage: ``python bench/flow.py [--quick] [--rounds 3]``; writes
-``bench/results/flow.json`` and ``flow.md``.
+image motion plus velocity; every quarter second the timing waits until the host runs at its
+normal speed (``_timing.Steady``: the host has slow spells of a few seconds). Usage:
+``python bench/flow.py [--quick] [--rounds 3]``; writes ``bench/results/flow.json`` and
+``flow.md``.
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 from _results import fmt, write_results
+from _timing import steady
 
 from visloc.flow import EgoMotion, block_flow, global_motion, ground_velocity
 from visloc.flow.direct import refine_motion
@@ -198,6 +201,7 @@ def run(size, n_flights, seconds, rounds, seed0, camera=None, exposure_step=Fals
     results = {m: [None] * len(pairs) for m in methods}
     for r in range(rounds):
         for j, (a, b, cam, hgt, _, _) in enumerate(pairs):
+            steady().wait(every=0.25)
             order = list(methods) if (r + j) % 2 == 0 else list(methods)[::-1]
             for m in order:
                 t0 = time.perf_counter()
@@ -280,6 +284,7 @@ def main(argv=None) -> int:
         res = run(size, n_flights, seconds, args.rounds, 10, camera, step, slow, shadow)
         res["still"] = still_frames(size)
         result["sizes"][key] = res
+    result["steady"] = steady().summary()
     write_results(args.out, "flow", result, markdown(result))
     return 0
 

@@ -15,7 +15,9 @@ Poses: visloc's own; OpenCV ``solvePnP(IPPE_SQUARE)`` on its SUBPIX corners (and
 all with the frame's true intrinsics and distortion.
 
 Timing is interleaved (every frame: each detector in turn, several rounds) and reported as
-medians per frame and ratios to OpenCV's default detector.
+medians per frame and ratios to OpenCV's default detector; every quarter second it waits until
+the host runs at its normal speed (``_timing.Steady``: the host has slow spells of a few
+seconds).
 
 Usage::
 
@@ -37,6 +39,7 @@ import cv2
 import numpy as np
 from _peers import AprilTagProcess
 from _results import fmt, write_results
+from _timing import steady
 
 from visloc.markers import FAST_PASSES, MarkerDetector
 from visloc.pose import Camera, estimate_marker_pose, rotation_angle
@@ -141,6 +144,7 @@ def run_rendered(size, methods, rounds, dict_name, sets, seed0, camera=True):
     outputs = {m: [None] * len(scenes) for m in methods}
     for r in range(rounds):
         for k, (_, sc) in enumerate(scenes):
+            steady().wait(every=0.25)
             order = list(methods) if (r + k) % 2 == 0 else list(methods)[::-1]
             for m in order:
                 t0 = time.perf_counter()
@@ -228,6 +232,7 @@ def run_boards(rounds: int, n: int, seed0: int = 9) -> dict:
     out = {m: [None] * len(frames) for m in run}
     for r in range(rounds):
         for k, (name, sc) in enumerate(frames):
+            steady().wait(every=0.25)
             for m in (list(run) if (r + k) % 2 == 0 else list(run)[::-1]):
                 t0 = time.perf_counter()
                 dets = run[m](sc.image, BOARD_SETS[name][1])
@@ -294,10 +299,12 @@ def stage_times(size, sets, seed0, rounds=3):
             setattr(det_mod, name, timed(name, fn))
         for _ in range(rounds):
             spent.update(dict.fromkeys(STAGES, 0.0))
-            t0 = time.perf_counter()
+            total = 0.0
             for img in images:
+                steady().wait(every=0.25)
+                t0 = time.perf_counter()
                 vl.detect(img)
-            total = time.perf_counter() - t0
+                total += time.perf_counter() - t0
             row = {STAGES[k]: 1e3 * v / n for k, v in spent.items()}
             row["rest (Python glue, duplicates, results)"] = 1e3 * (total - sum(spent.values())) / n
             row["total"] = 1e3 * total / n
@@ -385,6 +392,7 @@ def main(argv=None) -> int:
     result["stages"] = {f"{w}x{h}": stage_times((w, h), sets, 1) for w, h in sizes}
     for at in _APRILTAG:
         at.close()
+    result["steady"] = steady().summary()
     write_results(args.out, "markers", result, markdown(result), default=_plain)
     return 0
 

@@ -12,7 +12,8 @@
   Kalman filter and controller: position RMS from the set point, estimate error, speed.
 - ``hover-vision`` with the camera's true pose as every fix (no marker vision), the frames
   rendered or not: the loop's own speed, the ceiling of the vision rows' ``x real time``.
-  Every row runs three times, interleaved; its speed is the median.
+  Every row runs three times, interleaved; its speed is the median. Each run starts once the
+  host runs at its normal speed (``_timing.Steady``: the host has slow spells of a few seconds).
 - ``sidestep`` with the motors drawn at +-1 and +-2 sigma (4 seeds each).
 - ``--sweep``: the grid of position / attitude loop specifications that chose the defaults
   of :class:`visloc.control.ControlSpecs` (side step and push on the non-linear model, the
@@ -35,6 +36,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 from _results import fmt, write_results
+from _timing import steady
 
 from visloc.control import Controller, ControlSpecs, LoopSpec, design_gains, vertex_check
 from visloc.model import ARDRONE2
@@ -120,6 +122,7 @@ def _median_speed(runs: dict, rounds: int) -> list[dict]:
     rows: dict[str, list[dict]] = {name: [] for name in runs}
     for k in range(rounds):
         for name in (list(runs) if k % 2 == 0 else list(runs)[::-1]):
+            steady().wait()
             rows[name].append(_row(name, runs[name]()))
     out = []
     for name, rs in rows.items():
@@ -212,7 +215,8 @@ def markdown(result) -> str:
         "joining at once, a full detection only when following fails, unless said; the two "
         "'true pose' rows take the marker vision out, each fix the camera's true pose, to show the loop's own "
         f"speed with the frames rendered and without; each row's x real time is the median of {ROUNDS} "
-        "interleaved runs of the same flight, their range in brackets). Settling: 5 % band "
+        "interleaved runs of the same flight, their range in brackets, each run started when the host ran at its "
+        "normal speed: `bench/_timing.py`). Settling: 5 % band "
         "(5 cm; 25 cm for the 5 m steps, counted from the trajectory's end); height dip: largest height "
         "loss after the step or push; for the squares and eights, pos RMS is the tracking error from the moving "
         "reference."), "",
@@ -253,6 +257,7 @@ def main(argv=None) -> int:
     cv2.setNumThreads(1)
     result = {"cpus": sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None,
               "scenarios": scenarios(args.quick)}
+    result["steady"] = steady().summary()
     if args.sweep:
         result["sweep"] = sweep()
     write_results(args.out, "sim", result, markdown(result))

@@ -7,13 +7,16 @@ the same place in another, listing those that differ by more than a tolerance.
 Numbers are matched by position: the same file, line and cell (table rows) or the same line and
 order (prose lines). A pair counts as different when it differs by more than ``--tol`` of the
 larger and by more than one unit of the last digit printed (0.43 against 0.44 is rounding, not a
-change). Files whose tables changed shape are named and skipped. Exit status 0 when every number
-is within the tolerance, 1 when one is not, 2 on bad input.
+change). Files whose tables changed shape are named and skipped. Where both runs' JSON record
+the host's normal reference time (``bench/_timing.py``), it is printed beside the file's count: a
+timing that moved with it moved with the host. Exit status 0 when every number is within the
+tolerance, 1 when one is not, 2 on bad input.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import re
 import sys
 from pathlib import Path
@@ -61,6 +64,18 @@ def compare_file(old: Path, new: Path, tol: float) -> tuple[list[str], int]:
     return out, count
 
 
+def host_reference(old: Path, new: Path) -> str:
+    """``" (host reference workload: OLD ms -> NEW ms)"`` from two runs' JSON, or "" where
+    either does not record it."""
+    refs = []
+    for path in (old, new):
+        try:
+            refs.append(json.loads(path.read_text())["steady"]["reference_ms_normal"])
+        except (OSError, ValueError, KeyError, TypeError):
+            return ""
+    return f" (host reference workload: {refs[0]:.3f} -> {refs[1]:.3f} ms)"
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("old", type=Path, help="a results folder (e.g. bench/results)")
@@ -84,7 +99,8 @@ def main(argv: list[str] | None = None) -> int:
             bad += 1
             continue
         lines, count = compare_file(old, new, args.tol)
-        print(f"== {name}: {count} numbers compared, {len(lines)} beyond {args.tol:.0%}")
+        ref = host_reference(args.old / f"{name}.json", args.new / f"{name}.json")
+        print(f"== {name}: {count} numbers compared, {len(lines)} beyond {args.tol:.0%}{ref}")
         for line in lines:
             print("  " + line)
         bad += len(lines)

@@ -1,6 +1,7 @@
 """``bench/compare.py``: two runs' Markdown results compared number by number."""
 
 import importlib.util
+import json
 from pathlib import Path
 
 import pytest
@@ -51,3 +52,15 @@ def test_changed_shape_and_bad_input(tmp_path, capsys):
     assert "not compared" in capsys.readouterr().out
     assert compare.main([str(old), str(tmp_path / "missing")]) == 2
     assert compare.main([str(old), str(new), "--tol", "1.5"]) == 2
+
+
+def test_host_reference_is_printed_where_both_runs_record_it(tmp_path, capsys):
+    old, new = tmp_path / "old", tmp_path / "new"
+    for folder, ref in ((old, 0.3), (new, 0.45)):
+        _write(folder, "x", "| a | 1 |\n")
+        (folder / "x.json").write_text(json.dumps({"steady": {"reference_ms_normal": ref}}))
+    assert compare.main([str(old), str(new)]) == 0
+    assert "host reference workload: 0.300 -> 0.450 ms" in capsys.readouterr().out
+    (new / "x.json").write_text("{}")  # no record: nothing printed
+    assert compare.main([str(old), str(new)]) == 0
+    assert "host reference" not in capsys.readouterr().out

@@ -27,7 +27,8 @@ at 1.5-2.5 m: the image moves less than a pixel per frame, the hover regime); an
 shadow (a soft band of 40 % less light drifting 0.5 px per frame over the ground). Each pair's
 velocity is scaled by the height when its second frame was taken (``ground_velocity``'s
 convention). Timing is interleaved per pair (each method in turn, several rounds) and covers
-image motion plus velocity; every quarter second the timing waits until the host runs at its
+image motion plus velocity; each pair's time is its best over the rounds, ``ms/pair`` the
+median over the pairs; every quarter second the timing waits until the host runs at its
 normal speed (``_timing.Steady``: the host has slow spells of a few seconds). Usage:
 ``python bench/flow.py [--quick] [--rounds 3]``; writes ``bench/results/flow.json`` and
 ``flow.md``.
@@ -216,7 +217,8 @@ def run(size, n_flights, seconds, rounds, seed0, camera=None, exposure_step=Fals
         speed = np.array([np.linalg.norm(p[4]) for p in pairs])
         rel = abs_err / np.maximum(speed, 0.05)
         yaw = np.array([abs(gv.yaw_rate - p[5]) for gv, p in zip(results[m], pairs, strict=True)])
-        stats[m] = {"ms_median": 1e3 * float(np.median(times[m])), "abs_err_median": float(np.median(abs_err)),
+        best = np.asarray(times[m]).reshape(rounds, -1).min(axis=0)  # each pair's best over the rounds
+        stats[m] = {"ms_median": 1e3 * float(np.median(best)), "abs_err_median": float(np.median(abs_err)),
                     "abs_err_p90": float(np.percentile(abs_err, 90)), "rel_err_median": float(np.median(rel)),
                     "rel_err_p90": float(np.percentile(rel, 90)), "yaw_rate_err_median": float(np.median(yaw)),
                     "yaw_rate_err_p90": float(np.percentile(yaw, 90))}
@@ -248,7 +250,8 @@ def markdown(result) -> str:
         base = res["methods"]["dis"]["ms_median"]
         lines.append(f"\n**{key}**: {res['pairs']} pairs, speed p10/p50/p90 {res['speed_m_s_p10_p50_p90']} m/s, "
                      f"heights {res['heights_m_min_max'][0]:.2f}-{res['heights_m_min_max'][1]:.2f} m, "
-                     f"|yaw rate| p90 {res['yaw_rate_abs_p90']:.2f} rad/s\n")
+                     f"|yaw rate| p90 {res['yaw_rate_abs_p90']:.2f} rad/s; ms/pair: each pair's best of "
+                     f"{result['rounds']} rounds, the median over the pairs\n")
         lines.append("| method | ms/pair | ratio to DIS | rel. err median | rel. err p90 | abs. err median m/s | abs. err p90 m/s | yaw-rate err median rad/s | p90 |")
         lines.append("|---|---|---|---|---|---|---|---|---|")
         for m, s in res["methods"].items():

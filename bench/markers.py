@@ -14,10 +14,10 @@ with default parameters and with ``CORNER_REFINE_SUBPIX``; AprilTag 3 (pupil-apr
 Poses: visloc's own; OpenCV ``solvePnP(IPPE_SQUARE)`` on its SUBPIX corners (and AprilTag's),
 all with the frame's true intrinsics and distortion.
 
-Timing is interleaved (every frame: each detector in turn, several rounds) and reported as
-medians per frame and ratios to OpenCV's default detector; every quarter second it waits until
-the host runs at its normal speed (``_timing.Steady``: the host has slow spells of a few
-seconds).
+Timing is interleaved (every frame: each detector in turn, several rounds); each frame's time
+is its best over the rounds, and the tables give the median over the frames and ratios to
+OpenCV's default detector. Every quarter second the timing waits until the host runs at its
+normal speed (``_timing.Steady``: the host has slow spells of a few seconds).
 
 Usage::
 
@@ -204,7 +204,8 @@ def run_rendered(size, methods, rounds, dict_name, sets, seed0, camera=True):
                 "trans_err_median_pct": float(100 * np.median(trans)) if trans else None,
                 "flip_rate": flips / len(rot) if rot else None,
             }
-        stats[m] = {"ms_median": 1e3 * float(np.median(times[m])), "ms_mean": 1e3 * float(np.mean(times[m])),
+        best = _best(times[m], rounds)
+        stats[m] = {"ms_median": 1e3 * float(np.median(best)), "ms_mean": 1e3 * float(np.mean(best)),
                     "sets": per_set}
     return stats
 
@@ -216,7 +217,8 @@ BOARD_SETS = {"camera-like easy": ("easy", True), "camera-like hard": ("hard", T
 def run_boards(rounds: int, n: int, seed0: int = 9) -> dict:
     """AprilGrid-style boards (tags touching the grid's corner squares, Kalibr's layout;
     :func:`visloc.synth.random_board_scene`), 640x480: recall (right id, every corner within
-    3 px of the truth), corner RMS and median ms per frame, interleaved. ``visloc_boards`` is
+    3 px of the truth), corner RMS and ms per frame (each frame's best of the rounds, the median
+    over the frames), interleaved. ``visloc_boards`` is
     ``MarkerDetector(..., erode=2)`` (stage 3b); visloc reads the linear renders with
     ``response="linear"``."""
     frames = [(name, random_board_scene(np.random.default_rng([seed0, k, i]), difficulty=diff, camera=cam))
@@ -255,7 +257,7 @@ def run_boards(rounds: int, n: int, seed0: int = 9) -> dict:
                         errs.extend(np.sqrt(((c - truth[mid]) ** 2).sum(axis=1)))
             per[name] = {"found": found, "tags": total, "recall": found / total if total else None,
                          "corner_rms_px": float(np.sqrt(np.mean(np.square(errs)))) if errs else None}
-        stats[m] = {"ms_median": 1e3 * float(np.median(times[m])), "sets": per}
+        stats[m] = {"ms_median": 1e3 * float(np.median(_best(times[m], rounds))), "sets": per}
     return stats
 
 
@@ -267,11 +269,16 @@ STAGES = {"blur": "2 blur", "threshold": "3 threshold", "find_candidates": "4-5 
           "cell_white_fractions": "9 area read (confidence)", "decode": "10 dictionary"}
 
 
+def _best(seconds: list[float], rounds: int) -> np.ndarray:
+    """Each frame's best time over the rounds, from times appended round by round."""
+    return np.asarray(seconds).reshape(rounds, -1).min(axis=0)
+
+
 def stage_times(size, sets, seed0, rounds=3):
     """Where visloc's time goes: ms per frame in each stage function of the detector (wrapped
     with a timer for this run only) over the same rendered frames as :func:`run_rendered`:
-    the split of the median of ``rounds`` passes through the frames (one slow spell of the
-    host moves a mean). All passes run on the calling thread here, so that the stage times
+    the split of the fastest of ``rounds`` passes through the frames (a slow spell of the host
+    moves one pass). All passes run on the calling thread here, so that the stage times
     add up."""
     import visloc.markers.detector as det_mod
 
@@ -313,7 +320,7 @@ def stage_times(size, sets, seed0, rounds=3):
         det_mod._THREAD_MAX_PIXELS = threaded
         for name, fn in originals.items():
             setattr(det_mod, name, fn)
-    return sorted(per_round, key=lambda row: row["total"])[len(per_round) // 2]  # the median round: parts add up
+    return min(per_round, key=lambda row: row["total"])  # the fastest pass, whole: its parts add up
 
 
 def _plain(o):
@@ -324,7 +331,8 @@ def _plain(o):
 def markdown(result) -> str:
     lines = []
     for key, res in result["rendered"].items():
-        lines.append(f"\n**{key}** (median ms per frame over all sets; ratio to OpenCV default; `common`: the "
+        lines.append(f"\n**{key}** (ms per frame: each frame's best of the rounds, the median over all sets; ratio to "
+                     "OpenCV default; `common`: the "
                      "corners of the markers every method in the table found, RMS / median px)\n")
         base = res["opencv"]["ms_median"]
         lines.append("| method | ms/frame | ratio | set | recall | FP/frame | corner RMS px | corner median px | common "
@@ -341,7 +349,8 @@ def markdown(result) -> str:
                                                  fmt(s["trans_err_median_pct"], 2), fmt(s["flip_rate"], 3)]) + " |")
     if result.get("boards"):
         lines.append("\n**AprilGrid-style boards**, 640x480 DICT_APRILTAG_36h11 (tags touching the grid's corner "
-                     "squares; found = right id and every corner within 3 px; `visloc`: defaults, stage 3c on; `visloc_boards` = `erode=2`, stage 3b on every frame)\n")
+                     "squares; found = right id and every corner within 3 px; `visloc`: defaults, stage 3c on; `visloc_boards` = `erode=2`, stage 3b on every frame; "
+                     "ms/frame: each frame's best of the rounds, the median over the frames)\n")
         lines.append("| method | ms/frame | set | found | recall | corner RMS px |")
         lines.append("|---|---|---|---|---|---|")
         for m, st in result["boards"].items():
@@ -352,7 +361,7 @@ def markdown(result) -> str:
     if result.get("stages"):
         sizes = list(result["stages"])
         lines.append("\n**Where visloc's time goes** (ms per frame in each stage over the same camera-like "
-                     "DICT_4X4_50 frames, the pass through them with the median total of 3, every pass on one thread; "
+                     "DICT_4X4_50 frames, the pass through them with the lowest total of 3, every pass on one thread; "
                      "the timers add a little)\n")
         lines.append("| stage | " + " | ".join(sizes) + " |")
         lines.append("|---|" + "---|" * len(sizes))

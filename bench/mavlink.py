@@ -6,7 +6,8 @@ pymavlink receiver draining it.
 
 Each row times ``visloc localize``'s own per-fix step (:func:`visloc.commands.localize._send_fix`:
 the frame change, the body attitude, the covariance blocks, packing, the send) over a
-filter that has taken real fixes, N calls, median and 90th percentile in microseconds.
+filter that has taken real fixes, N calls, median and 90th percentile in microseconds; every
+50 ms the timing waits until the host runs at its normal speed (``_timing.Steady``).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from types import SimpleNamespace
 
 import numpy as np
 from _results import fmt, write_results
+from _timing import steady
 
 from visloc.commands.localize import _send_fix
 from visloc.estimation.fusion import MapFixFusion
@@ -65,6 +67,7 @@ def run(n: int) -> dict:
                 _send_fix(link, args, fusion, R_map_cam, k / 30)
             spent = []
             for k in range(n):
+                steady().wait(every=0.05)
                 t0 = time.perf_counter()
                 _send_fix(link, args, fusion, R_map_cam, 1.0 + k / 30)
                 spent.append(time.perf_counter() - t0)
@@ -93,6 +96,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     result = run(args.n)
     result["machine"] = {"python": sys.version.split()[0], "platform": platform.platform()}
+    result["steady"] = steady().summary()
     write_results(args.out, "mavlink", result, markdown(result))
     return 0
 

@@ -1,9 +1,9 @@
 """Timing on a shared host: wait out the host's slow spells before a timed chunk of work.
 
 Measured on the 2-core host these benches ran on (2026-12-06, a workload of one OpenCV blur +
-threshold and a 20,000-step Python loop, timed every 0.65 s for 4 minutes): the
-host runs at its normal speed most of the time, but in spells of a few seconds to about
-15 s (several in a row now and then) the same work takes 1.4-1.8x as long, OpenCV and Python
+threshold and a Python loop, timed back to back and every 0.65 s for minutes): the host runs
+at its normal speed most of the time, but in spells of a few milliseconds to about 15 s
+(several in a row now and then) the same work takes 1.4-1.9x as long, OpenCV and Python
 alike. A bench whose tables are timed partly in such spells moves by 15-30 % from run to run
 while its ratios (visloc and the peer interleaved) hold.
 
@@ -14,17 +14,22 @@ bar), sleeps and tries again (for at most ``max_wait`` s per call). The work its
 as before; only when it starts changes. Each bench's JSON records how often and how long it
 waited (``Steady.summary``).
 
+A spell that starts after the check only slows that chunk down, so the benches keep each
+item's best over their rounds (:func:`best_per_item`).
+
 Usage::
 
-    steady = Steady()
-    for frame in frames:
-        steady.wait(every=0.25)     # at most one check per 0.25 s
-        t0 = time.perf_counter(); work(frame); times.append(time.perf_counter() - t0)
+    for r in range(rounds):
+        for frame in frames:
+            steady().wait(every=0.25)     # at most one check per 0.25 s
+            t0 = time.perf_counter(); work(frame); times.append(time.perf_counter() - t0)
+    best = best_per_item(times, rounds)   # (frames,) s
 """
 
 from __future__ import annotations
 
 import time
+from collections import deque
 
 import numpy as np
 
@@ -57,7 +62,7 @@ class Steady:
 
     def __init__(self, tolerance: float = 1.15, max_wait: float = 60.0) -> None:
         self.tolerance, self.max_wait = tolerance, max_wait
-        self._history: list[float] = []
+        self._history: deque[float] = deque(maxlen=500)
         for _ in range(20):
             self._probe()
         self.checks = self.waits = self.gave_up = 0
@@ -67,7 +72,7 @@ class Steady:
     @property
     def normal(self) -> float:
         """The reference workload's normal time, s: the 20th percentile of the last 500 checks."""
-        return float(np.percentile(self._history[-500:], 20))
+        return float(np.percentile(self._history, 20))
 
     def _probe(self) -> bool:
         """Time the reference (best of 3) and record it; whether it ran at the normal speed."""
@@ -98,6 +103,12 @@ class Steady:
         """Checks made, waits, give-ups and seconds waited, for the bench's JSON."""
         return {"checks": self.checks, "waits": self.waits, "gave_up": self.gave_up,
                 "waited_s": round(self.waited_s, 1), "reference_ms_normal": round(1e3 * self.normal, 3)}
+
+
+def best_per_item(seconds: list[float], rounds: int) -> np.ndarray:
+    """Each item's best time over the rounds (items,), from times appended round by round
+    (``rounds`` x items values, every round over the same items in the same order)."""
+    return np.asarray(seconds).reshape(rounds, -1).min(axis=0)
 
 
 _SHARED: Steady | None = None

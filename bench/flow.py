@@ -46,7 +46,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 from _results import fmt, write_results
-from _timing import steady
+from _timing import best_per_item, steady
 
 from visloc.flow import EgoMotion, block_flow, global_motion, ground_velocity
 from visloc.flow.direct import refine_motion
@@ -217,7 +217,7 @@ def run(size, n_flights, seconds, rounds, seed0, camera=None, exposure_step=Fals
         speed = np.array([np.linalg.norm(p[4]) for p in pairs])
         rel = abs_err / np.maximum(speed, 0.05)
         yaw = np.array([abs(gv.yaw_rate - p[5]) for gv, p in zip(results[m], pairs, strict=True)])
-        best = np.asarray(times[m]).reshape(rounds, -1).min(axis=0)  # each pair's best over the rounds
+        best = best_per_item(times[m], rounds)
         stats[m] = {"ms_median": 1e3 * float(np.median(best)), "abs_err_median": float(np.median(abs_err)),
                     "abs_err_p90": float(np.percentile(abs_err, 90)), "rel_err_median": float(np.median(rel)),
                     "rel_err_p90": float(np.percentile(rel, 90)), "yaw_rate_err_median": float(np.median(yaw)),

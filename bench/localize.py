@@ -42,7 +42,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 from _results import write_results
-from _timing import steady
+from _timing import best_per_item, steady
 from scipy.spatial.transform import Rotation
 
 from visloc.markers import MarkerDetector, MarkerTracker
@@ -172,7 +172,7 @@ def run_flight(seconds, rounds):
             out.setdefault(m, got)
     stats = {}
     for m in ms:
-        best = _best(times[m], rounds)
+        best = best_per_item(times[m], rounds)
         stats[m] = {"ms_median": 1e3 * float(np.median(best)), "ms_mean": 1e3 * float(np.mean(best)),
                     **_errors(truth, out[m])}
         if hasattr(ms[m], "markers"):
@@ -202,16 +202,11 @@ def run(n, rounds, hard):
                 if r == 0:
                     out[m][k] = res
     stats = {}
-    detect_ms = 1e3 * float(np.median(_best(ms["visloc"].detect_s, rounds)))
+    detect_ms = 1e3 * float(np.median(best_per_item(ms["visloc"].detect_s, rounds)))
     truth = [(v.position, v.T_cam_map.R) for v in views]
     for m in ms:
-        stats[m] = {"ms_median": 1e3 * float(np.median(_best(times[m], rounds))), **_errors(truth, out[m])}
+        stats[m] = {"ms_median": 1e3 * float(np.median(best_per_item(times[m], rounds))), **_errors(truth, out[m])}
     return {"frames": n, "stats": stats, "visloc_detect_ms_median": detect_ms}
-
-
-def _best(seconds: list[float], rounds: int) -> np.ndarray:
-    """Each frame's best time over the rounds, from times appended round by round."""
-    return np.asarray(seconds).reshape(rounds, -1).min(axis=0)
 
 
 def attitude(minutes: float = 10.0) -> dict:

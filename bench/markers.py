@@ -39,7 +39,7 @@ import cv2
 import numpy as np
 from _peers import AprilTagProcess
 from _results import fmt, write_results
-from _timing import steady
+from _timing import best_per_item, steady
 
 from visloc.markers import FAST_PASSES, MarkerDetector
 from visloc.pose import Camera, estimate_marker_pose, rotation_angle
@@ -204,7 +204,7 @@ def run_rendered(size, methods, rounds, dict_name, sets, seed0, camera=True):
                 "trans_err_median_pct": float(100 * np.median(trans)) if trans else None,
                 "flip_rate": flips / len(rot) if rot else None,
             }
-        best = _best(times[m], rounds)
+        best = best_per_item(times[m], rounds)
         stats[m] = {"ms_median": 1e3 * float(np.median(best)), "ms_mean": 1e3 * float(np.mean(best)),
                     "sets": per_set}
     return stats
@@ -257,7 +257,7 @@ def run_boards(rounds: int, n: int, seed0: int = 9) -> dict:
                         errs.extend(np.sqrt(((c - truth[mid]) ** 2).sum(axis=1)))
             per[name] = {"found": found, "tags": total, "recall": found / total if total else None,
                          "corner_rms_px": float(np.sqrt(np.mean(np.square(errs)))) if errs else None}
-        stats[m] = {"ms_median": 1e3 * float(np.median(_best(times[m], rounds))), "sets": per}
+        stats[m] = {"ms_median": 1e3 * float(np.median(best_per_item(times[m], rounds))), "sets": per}
     return stats
 
 
@@ -267,11 +267,6 @@ STAGES = {"blur": "2 blur", "threshold": "3 threshold", "find_candidates": "4-5 
           "refine_quads": "8 edge refinement", "read_cells": "9 cells read (first look and stage 9)",
           "sample_cells": "9 second reads: samples", "read_bits": "9 second reads: bits",
           "cell_white_fractions": "9 area read (confidence)", "decode": "10 dictionary"}
-
-
-def _best(seconds: list[float], rounds: int) -> np.ndarray:
-    """Each frame's best time over the rounds, from times appended round by round."""
-    return np.asarray(seconds).reshape(rounds, -1).min(axis=0)
 
 
 def stage_times(size, sets, seed0, rounds=3):

@@ -27,3 +27,9 @@ def test_a_check_that_always_passes_never_waits_and_every_skips_checks():
 
 def test_the_shared_steady_is_one_object():
     assert timing.steady() is timing.steady()
+
+
+def test_best_per_item_takes_each_items_fastest_round():
+    times = [3.0, 1.0, 5.0,   # round 0 over three items
+             2.0, 4.0, 6.0]   # round 1
+    assert timing.best_per_item(times, 2).tolist() == [2.0, 1.0, 5.0]

@@ -1,5 +1,14 @@
 """Shared pytest fixtures and helpers."""
 
+import sys
+
+# Bytecode is written for this run even where the environment says not to (this machine sets
+# PYTHONDONTWRITEBYTECODE=1): the suite's processes (two xdist workers, Dask workers, CLI
+# subprocesses) would otherwise each compile visloc's modules and assertion-rewrite the test
+# modules from source. Measured on fresh clones on the 2-core host, runs interleaved: 75.5 and
+# 72.6 s without this line, 72.6 and 70.1 s with it.
+sys.dont_write_bytecode = False
+
 import cv2
 import numpy as np
 import pytest

@@ -34,6 +34,7 @@ RECEIVER = """
 import sys
 from pymavlink import mavutil
 rx = mavutil.mavlink_connection(f"udpin:127.0.0.1:{sys.argv[1]}", dialect="common")
+print("ready", flush=True)
 n = 0
 while rx.recv_match(blocking=True, timeout=2.0) is not None:
     n += 1
@@ -56,7 +57,10 @@ def run(n: int) -> dict:
         port = s.getsockname()[1]
     # the receiver in its own process, as a flight stack is: it counts until the link is quiet
     rx = subprocess.Popen([sys.executable, "-c", RECEIVER, str(port)], stdout=subprocess.PIPE, text=True)
-    time.sleep(1.0)  # bound and listening
+    # bound and listening before the first send (a fixed 1 s sleep was too short on a slow host:
+    # 989 of 4236 datagrams arrived)
+    if rx.stdout.readline().strip() != "ready":
+        raise RuntimeError("the MAVLink receiver did not start")
     fusion = _filter()
     R_map_cam = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
     rows = {}

@@ -229,7 +229,7 @@ def _send_fix(link, args: argparse.Namespace, fusion, R_map_cam: np.ndarray, t: 
     ``visloc.io.mavlink``), the filter's position (and velocity) covariance; the attitude's
     variances are unknown (NaN: the flight stack uses its own noise setting)."""
     from visloc.io.mavlink import MAP_FRAMES, body_attitude_ned
-    from visloc.pose.rotations import matrix_to_euler
+    from visloc.pose.rotations import matrix_to_euler_list
 
     F = MAP_FRAMES[args.map_frame]
     R = body_attitude_ned(R_map_cam, args.map_frame)
@@ -242,7 +242,7 @@ def _send_fix(link, args: argparse.Namespace, fusion, R_map_cam: np.ndarray, t: 
         link.send_odometry(t, F @ fusion.position, R, F @ fusion.velocity, pose_covariance=pose_cov,
                            velocity_covariance=vel_cov, reset_counter=kf.resets)
     else:
-        link.send_vision_position(t, F @ fusion.position, matrix_to_euler(R), covariance=pose_cov,
+        link.send_vision_position(t, F @ fusion.position, matrix_to_euler_list(R[None])[0], covariance=pose_cov,
                                   reset_counter=kf.resets)
 
 
@@ -251,11 +251,11 @@ def _send_body(link, map_frame: str, bp, t: float) -> None:
     camera sending the drone its own position. The body's marker map has x forward, y left,
     z up (``visloc.io.mavlink``); its attitude goes out as FRD in NED."""
     from visloc.io.mavlink import MAP_FRAMES
-    from visloc.pose.rotations import matrix_to_euler
+    from visloc.pose.rotations import matrix_to_euler_list
 
     F = MAP_FRAMES[map_frame]
     R = F @ bp.T_ref_body.R @ np.diag([1.0, -1.0, -1.0])  # FRD body axes -> FLU marker axes -> map -> NED
-    link.send_vision_position(t, F @ bp.position, matrix_to_euler(R))
+    link.send_vision_position(t, F @ bp.position, matrix_to_euler_list(R[None])[0])
 
 
 def track(args: argparse.Namespace) -> int:

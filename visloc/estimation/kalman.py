@@ -196,6 +196,8 @@ class PositionVelocityKF:
 
         idx = np.arange(dims) * self.order
         self._idx = {"position": idx, "velocity": idx + 1, "acceleration": idx + 2}
+        self._blocks = {kind: np.ix_(i, i) for kind, i in self._idx.items()}  # made once: np.ix_ per call cost
+        # more than the copy (visloc.io.mavlink sends both blocks with every fix)
         self._H = {kind: np.eye(self.dim_x)[i] for kind, i in self._idx.items()
                    if kind != "acceleration" or model == "ca"}
 
@@ -289,14 +291,12 @@ class PositionVelocityKF:
     @property
     def position_covariance(self) -> FloatArray:
         """Covariance of the position (dims, dims), m^2; a copy."""
-        i = self._idx["position"]
-        return self.kf.P[np.ix_(i, i)].copy()
+        return self.kf.P[self._blocks["position"]]  # (advanced indexing: already a copy)
 
     @property
     def velocity_covariance(self) -> FloatArray:
         """Covariance of the velocity (dims, dims), m^2/s^2; a copy."""
-        i = self._idx["velocity"]
-        return self.kf.P[np.ix_(i, i)].copy()
+        return self.kf.P[self._blocks["velocity"]]
 
     @property
     def acceleration(self) -> FloatArray:

@@ -23,7 +23,18 @@ _TINY_NORM = 1e-6  # m/s^2: below this the accelerometer carries no direction (f
 
 
 def wrap_angle(angle: float) -> float:
-    """Wrap an angle (rad) into ``[-pi, pi)`` (returned unchanged when already inside)."""
+    """Wrap an angle (rad) into ``[-pi, pi)`` (returned unchanged when already inside).
+
+    Parameters
+    ----------
+    angle : float
+        An angle, rad (finite).
+
+    Returns
+    -------
+    float
+        The same direction in ``[-pi, pi)``, rad.
+    """
     if -math.pi <= angle < math.pi:
         return angle
     wrapped = (angle + math.pi) % _TWO_PI - math.pi

@@ -183,7 +183,7 @@ def sweep() -> list[dict]:
     for wa, wp, pm, ir in itertools.product([15, 20, 25], [2.5, 3, 3.5, 4], [45, 50, 55, 60], [0.05, 0.1]):
         spec = ControlSpecs(attitude=LoopSpec(wa, 60.0), position=LoopSpec(wp, pm, ir))
         try:
-            g = design_gains(P, spec)
+            g = design_gains(P, specs=spec)
         except ValueError:
             continue
         s, pu = simulate("sidestep", gains=g).metrics, simulate("push", gains=g).metrics

@@ -79,10 +79,10 @@ def test_specs_and_errors():
     with pytest.raises(ValueError, match="loop"):
         loop_margins("altitude")
     with pytest.raises(TypeError, match="specs"):
-        design_gains(P, {"attitude": (10, 60)})
+        design_gains(P, specs={"attitude": (10, 60)})
     # the position loop cannot cross over above the attitude loop with a PD
     with pytest.raises(ValueError, match="spec"):
-        design_gains(P, ControlSpecs(position=LoopSpec(30.0, 60.0)))
+        design_gains(P, specs=ControlSpecs(position=LoopSpec(30.0, 60.0)))
     with pytest.raises(ValueError, match="gains"):
         plant("x", P)
     num, den = plant("roll", P)
@@ -90,7 +90,7 @@ def test_specs_and_errors():
 
 
 def test_other_specs_scale_the_gains():
-    slow = design_gains(P, ControlSpecs(attitude=LoopSpec(5.0, 60.0), position=LoopSpec(1.0, 50.0)))
+    slow = design_gains(P, specs=ControlSpecs(attitude=LoopSpec(5.0, 60.0), position=LoopSpec(1.0, 50.0)))
     assert isinstance(slow, ControllerGains)
     ratio = (5.0 / ControlSpecs().attitude.crossover) ** 2  # kp = J w^2 cos PM
     assert slow.roll.kp == pytest.approx(design_gains(P).roll.kp * ratio)
@@ -143,7 +143,7 @@ def test_lqr_weights_without_a_solution_are_a_value_error():
 def test_gains_to_dict_is_json_ready_with_numpy_specs():
     import json
 
-    g = design_gains(ARDRONE2, ControlSpecs(height=LoopSpec(np.float32(3.0), 60.0, 0.1)))
+    g = design_gains(ARDRONE2, specs=ControlSpecs(height=LoopSpec(np.float32(3.0), 60.0, 0.1)))
     d = json.loads(json.dumps(g.to_dict()))  # a float32 gain used to stop json
     assert d["height"]["ki"] == pytest.approx(float(g.loop("height").ki))
 

@@ -56,8 +56,8 @@ def test_hover_is_an_equilibrium_for_any_heading():
 def test_pilot_frame_round_trip_and_heading(rng):
     s = rng.normal(size=12)
     origin = rng.normal(size=3)
-    sp = to_pilot(s, 0.8, origin)
-    np.testing.assert_allclose(from_pilot(sp, 0.8, origin), s)
+    sp = to_pilot(s, 0.8, origin=origin)
+    np.testing.assert_allclose(from_pilot(sp, 0.8, origin=origin), s)
     s = np.zeros(12)
     s[0], s[3] = 1.0, 2.0  # 1 m north, 2 m/s north; heading east: north is the pilot's left
     sp = to_pilot(s, np.pi / 2)

@@ -42,7 +42,7 @@ def test_lyapunov_unavailable_without_cvxpy(monkeypatch):
     res = common_lyapunov(np.array([A1, A2]))
     assert res.status == "unavailable" and res.P is None
     with pytest.raises(ValueError, match="test"):
-        largest_sigma("lyapunov")
+        largest_sigma(test="lyapunov")
 
 
 @pytest.fixture(scope="module")
@@ -99,7 +99,7 @@ def test_the_arm_distance_does_not_change_the_spectra(gains):
 
 def test_vertex_check_fails_far_out_and_largest_sigma(gains):
     assert not vertex_check(8.0, gains=gains).vertex_stable
-    n = largest_sigma("vertex", gains=gains, tol=0.02)
+    n = largest_sigma(test="vertex", gains=gains, tol=0.02)
     assert 7.0 < n < 7.6
     assert vertex_check(n, gains=gains).vertex_stable
     assert not vertex_check(n + 0.02, gains=gains).vertex_stable
@@ -114,7 +114,7 @@ def test_bad_arguments():
     with pytest.raises(TypeError, match="n_sigma"):
         vertex_check("2")
     with pytest.raises(ValueError, match="test"):
-        largest_sigma("eigen")
+        largest_sigma(test="eigen")
     with pytest.raises(ValueError, match="matrices"):
         vertex_stability(np.zeros((2, 3)))
 

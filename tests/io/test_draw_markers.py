@@ -53,7 +53,7 @@ def test_outline_is_sub_pixel() -> None:
 
 def test_pose_axes_are_projected() -> None:
     image = np.zeros((200, 200, 3), np.uint8)
-    out = draw_markers(image, [MarkerDetection(7, SQUARE)], [FACING], CAMERA, 0.5)
+    out = draw_markers(image, [MarkerDetection(7, SQUARE)], poses=[FACING], camera=CAMERA, marker_length=0.5)
     # x axis: (0.25, 0, 0) -> pixel (150, 100); y axis: (0, 0.25, 0) -> pixel (100, 50).
     assert _close(out[100, 135], AXIS_COLORS[0])
     assert _close(out[65, 100], AXIS_COLORS[1])
@@ -64,7 +64,7 @@ def test_pose_axes_are_projected() -> None:
 def test_pose_behind_camera_and_missing_pose_are_skipped() -> None:
     behind = Pose(np.eye(3), np.array([0.0, 0.0, -1.0]))
     dets = [MarkerDetection(1, SQUARE), MarkerDetection(2, SQUARE + 10)]
-    out = draw_markers(np.zeros((200, 200), np.uint8), dets, [behind, None], CAMERA, 0.5)
+    out = draw_markers(np.zeros((200, 200), np.uint8), dets, poses=[behind, None], camera=CAMERA, marker_length=0.5)
     assert out.shape == (200, 200, 3)
     assert not np.any(np.all(out == AXIS_COLORS[0], axis=2))
 
@@ -73,13 +73,13 @@ def test_bad_arguments_name_the_argument() -> None:
     image = np.zeros((50, 50), np.uint8)
     det = [MarkerDetection(1, SQUARE / 4)]
     with pytest.raises(ValueError, match="camera is required"):
-        draw_markers(image, det, [FACING])
+        draw_markers(image, det, poses=[FACING])
     with pytest.raises(ValueError, match="marker_length is required"):
-        draw_markers(image, det, [FACING], CAMERA)
+        draw_markers(image, det, poses=[FACING], camera=CAMERA)
     with pytest.raises(ValueError, match="poses must have one entry"):
-        draw_markers(image, det, [FACING, FACING], CAMERA, 0.1)
+        draw_markers(image, det, poses=[FACING, FACING], camera=CAMERA, marker_length=0.1)
     with pytest.raises(ValueError, match=r"camera\.K"):
-        draw_markers(image, det, [FACING], SimpleNamespace(K=np.eye(2), dist=None), 0.1)
+        draw_markers(image, det, poses=[FACING], camera=SimpleNamespace(K=np.eye(2), dist=None), marker_length=0.1)
     with pytest.raises(TypeError, match="image"):
         draw_markers(image.astype(np.int32), det)  # type: ignore[arg-type]
     bad = MarkerDetection(1, np.zeros((3, 2)))

@@ -93,9 +93,9 @@ def test_map_frames_turn_into_ned():
     assert MAP_FRAMES["enu"] @ p == pytest.approx([2.0, 1.0, -3.0])
     # a downward camera over a nwu map, image top toward north: the body is level, facing north
     R_map_cam = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
-    assert body_attitude_ned(R_map_cam, "nwu") == pytest.approx(np.eye(3))
+    assert body_attitude_ned(R_map_cam, map_frame="nwu") == pytest.approx(np.eye(3))
     with pytest.raises(ValueError, match="map_frame"):
-        body_attitude_ned(R_map_cam, "xyz")
+        body_attitude_ned(R_map_cam, map_frame="xyz")
 
 
 def test_localize_sends_every_fix_as_the_csv_says(tmp_path):

@@ -49,15 +49,15 @@ def _rows(path: Path) -> dict[tuple[str, str], list[tuple[int, object]]]:
 def _log_three_frames(log: RerunLogger) -> None:
     grey = np.full((48, 64), 100, np.uint8)
     bgr = np.dstack([grey, grey + 20, grey + 40])
-    log.log_frame(0, 0.0, grey, [MarkerDetection(7, SQUARE)], [POSE], CAMERA, 0.1)
+    log.log_frame(0, 0.0, grey, [MarkerDetection(7, SQUARE)], poses=[POSE], camera=CAMERA, marker_length=0.1)
     log.log_frame(
         1,
         0.04,
         bgr,
         [MarkerDetection(7, SQUARE), MarkerDetection(9, SQUARE + 5)],
-        [POSE, None],
-        CAMERA,
-        0.1,
+        poses=[POSE, None],
+        camera=CAMERA,
+        marker_length=0.1,
     )
     log.log_frame(2, 0.08, None, [])  # an unreadable frame
 
@@ -135,9 +135,9 @@ def test_bad_arguments(tmp_path: Path) -> None:
         image = np.zeros((48, 64), np.uint8)
         det = [MarkerDetection(7, SQUARE)]
         with pytest.raises(ValueError, match="marker_length"):
-            log.log_frame(0, 0.0, image, det, [POSE], CAMERA)
+            log.log_frame(0, 0.0, image, det, poses=[POSE], camera=CAMERA)
         with pytest.raises(ValueError, match="poses must have one entry"):
-            log.log_frame(0, 0.0, image, det, [], CAMERA, 0.1)
+            log.log_frame(0, 0.0, image, det, poses=[], camera=CAMERA, marker_length=0.1)
         with pytest.raises(ValueError, match="time"):
             log.log_frame(0, float("nan"), image, det)
         with pytest.raises(TypeError, match="camera"):

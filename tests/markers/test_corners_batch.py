@@ -39,7 +39,7 @@ ENGINES = [False, True] if NATIVE_QUADS else [False]  # numpy, and the compiled 
 def test_batch_equals_single(contours_and_hints, native):
     contours, hints = contours_and_hints
     assert len(contours) > 50
-    corners, ok, splits = fit_quads(contours, hints, splits=True, native=native)
+    corners, ok, splits = fit_quads(contours, hints=hints, splits=True, native=native)
     found = 0
     for i, c in enumerate(contours):
         single = fit_quad(c, hint=hints[i])
@@ -72,7 +72,7 @@ def test_without_hints_and_empty(contours_and_hints, native):
 @pytest.mark.parametrize("native", ENGINES)
 def test_a_given_smoothing_width_is_used(contours_and_hints, native):
     contours, hints = contours_and_hints
-    corners, ok, _ = fit_quads(contours[:30], hints[:30], sigma=2.5, native=native)
+    corners, ok, _ = fit_quads(contours[:30], hints=hints[:30], sigma=2.5, native=native)
     for i in range(30):
         single = fit_quad(contours[i], sigma=2.5, hint=hints[i])
         assert (single is not None) == bool(ok[i])

@@ -164,9 +164,9 @@ def test_the_coarse_pass_does_not_fit_markers_the_fine_pass_proposed(detector, m
     fitted = []
     original = det_mod.fit_quads
 
-    def counting(contours, hints, **kw):
+    def counting(contours, **kw):
         fitted.append(len(contours))
-        return original(contours, hints, **kw)
+        return original(contours, **kw)
 
     monkeypatch.setattr(det_mod, "fit_quads", counting)
     trace = detector.trace(random_scene(3, size=(320, 240), difficulty="easy").image)

@@ -24,7 +24,7 @@ the saddle point of a quadratic fitted to the light around it (:func:`refine_sad
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import KW_ONLY, dataclass, field
 from functools import cached_property
 from pathlib import Path
 
@@ -72,6 +72,7 @@ class CharucoBoard:
     square_length: float
     marker_length: float
     dictionary: str = "DICT_6X6_250"
+    _: KW_ONLY
     first_id: int = 0
     legacy: bool = False
 
@@ -259,7 +260,8 @@ class CharucoBoard:
         sx, sy = values["squares_x"], values["squares_y"]
         if not (math.isfinite(sx) and math.isfinite(sy)) or sx != int(sx) or sy != int(sy):
             raise ValueError(f"board file {path}: squares_x and squares_y must be integers, got {sx}, {sy}")
-        return cls(int(sx), int(sy), values["square_length"], values["marker_length"], dictionary, first, legacy)
+        return cls(int(sx), int(sy), values["square_length"], values["marker_length"], dictionary,
+                   first_id=first, legacy=legacy)
 
 
 def _whole_node(node: cv2.FileNode, path: Path, key: str, default: int) -> int:

@@ -50,7 +50,7 @@ def demo(args: argparse.Namespace) -> int:
             poses = [estimate_marker_pose(d.corners, MARKER_LENGTH, camera) for d in dets]
             ms = 1e3 * (time.perf_counter() - t0)
             jsonl.write({"frame": i, "source": name, "time": float(i), "markers": marker_records(dets, poses)})
-            sink.write(draw_markers(scene.image, dets, poses, camera, MARKER_LENGTH), name)
+            sink.write(draw_markers(scene.image, dets, poses=poses, camera=camera, marker_length=MARKER_LENGTH), name)
             truth = {m.id: m for m in scene.markers if m.visible}
             found = {d.id for d in dets}
             for d, p in zip(dets, poses, strict=True):

@@ -232,7 +232,7 @@ def _send_fix(link, args: argparse.Namespace, fusion, R_map_cam: np.ndarray, t: 
     from visloc.pose.rotations import matrix_to_euler_list
 
     F = MAP_FRAMES[args.map_frame]
-    R = body_attitude_ned(R_map_cam, args.map_frame)
+    R = body_attitude_ned(R_map_cam, map_frame=args.map_frame)
     kf = fusion.kf
     pose_cov = np.full((6, 6), np.nan)
     pose_cov[:3, :3] = F @ kf.position_covariance @ F.T

@@ -92,9 +92,11 @@ def detect(args: argparse.Namespace) -> int:
                 out.write({"frame": frame.index, "source": frame.name, "time": frame.time,
                            "markers": marker_records(dets, poses)})
             if sink:
-                sink.write(draw_markers(frame.image, dets, poses, cam, args.marker_length), frame.name)
+                sink.write(draw_markers(frame.image, dets, poses=poses, camera=cam, marker_length=args.marker_length),
+                           frame.name)
             if rec:
-                rec.log_frame(frame.index, frame.time, frame.image, dets, poses, cam, args.marker_length)
+                rec.log_frame(frame.index, frame.time, frame.image, dets, poses=poses, camera=cam,
+                              marker_length=args.marker_length)
             if link is not None:
                 pads = [p for d, p in zip(dets, poses or [], strict=False) if d.id == args.target_id and p is not None]
                 if pads:  # the best-fitting view of the pad

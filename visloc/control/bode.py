@@ -73,7 +73,7 @@ def frequency_response(
         raise ValueError("w: expected a 1-D array of finite frequencies > 0 rad/s, got None")
     freqs = _frequencies(w, min_size=1)
     s = 1j * freqs
-    num, den = plant(name, params, g)
+    num, den = plant(name, params, gains=g)
     k = g.loop(name)
     p = np.polyval(num, s) / np.polyval(den, s)
     c = k.kp + k.kd * s + k.ki / s  # eqs. (4.8)-(4.11) without the low-pass pole, §4.2.3

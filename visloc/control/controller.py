@@ -114,7 +114,7 @@ class Controller:
         self.params = check_params(params)
         if gains is not None and not isinstance(gains, ControllerGains):
             raise TypeError(f"gains: expected ControllerGains, got {type(gains).__name__}")
-        self.gains = design_gains(self.params, specs) if gains is None else gains
+        self.gains = design_gains(self.params, specs=specs) if gains is None else gains
         self.arm = resolve_arm(self.params, arm)
         self._gamma = mixer_matrix(self.params, arm=self.arm)  # report eq. (2.12), mean c, d
         self._K = self.gains.K(integral=True)

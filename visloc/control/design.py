@@ -74,7 +74,7 @@ class LoopSpec:
             raise ValueError(f"integral: expected a corner below crossover (< 1), got {ratio!r}")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ControlSpecs:
     """Specifications of all loops (our choice: the report prints none).
 
@@ -187,7 +187,7 @@ class ControllerGains:
         """
         return getattr(self, loop_name(name))
 
-    def K(self, integral: bool = True) -> FloatArray:
+    def K(self, *, integral: bool = True) -> FloatArray:
         """State-feedback matrix of ``u = -K x`` (report eq. 4.5).
 
         Parameters
@@ -249,7 +249,7 @@ def loop_name(loop: str) -> str:
     return name
 
 
-def plant(loop: str, params: ARDrone2Params, gains: ControllerGains | None = None
+def plant(loop: str, params: ARDrone2Params, *, gains: ControllerGains | None = None
           ) -> tuple[FloatArray, FloatArray]:
     """Numerator and denominator polynomials (highest power first) of a loop's plant.
 
@@ -363,7 +363,7 @@ def _polynomial(coeffs: object, name: str) -> FloatArray:
     return a
 
 
-def design_gains(params: ARDrone2Params, specs: ControlSpecs | None = None) -> ControllerGains:
+def design_gains(params: ARDrone2Params, *, specs: ControlSpecs | None = None) -> ControllerGains:
     """Design all six loops from ``specs`` (attitude first; position around it, Fig. 4.3).
 
     Parameters
@@ -392,7 +392,7 @@ def design_gains(params: ARDrone2Params, specs: ControlSpecs | None = None) -> C
     inner = {n: design_loop(*plant(n, p), s.for_loop(n)) for n in ("roll", "pitch", "yaw", "height")}
     # the x / y plants only read the attitude gains: fill the outer loops with placeholders
     partial = ControllerGains(**inner, x=inner["pitch"], y=inner["roll"], specs=s)
-    outer = {n: design_loop(*plant(n, p, partial), s.for_loop(n)) for n in ("x", "y")}
+    outer = {n: design_loop(*plant(n, p, gains=partial), s.for_loop(n)) for n in ("x", "y")}
     return ControllerGains(**inner, **outer, specs=s)
 
 

@@ -58,7 +58,7 @@ def yaw_rotation(psi: float) -> FloatArray:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])  # report eq. (4.2)
 
 
-def to_pilot(state: ArrayLike, psi: float, origin: ArrayLike | None = None) -> FloatArray:
+def to_pilot(state: ArrayLike, psi: float, *, origin: ArrayLike | None = None) -> FloatArray:
     """Express a model state (12,) in the pilot frame of heading ``psi`` (report eq. 4.1).
 
     Parameters
@@ -101,7 +101,7 @@ def _pilot_values(state: list[float], psi: float, origin: list[float] | None = N
             c * state[3] + s * state[4], -s * state[3] + c * state[4], state[5], *state[6:]]
 
 
-def from_pilot(state_p: ArrayLike, psi: float, origin: ArrayLike | None = None) -> FloatArray:
+def from_pilot(state_p: ArrayLike, psi: float, *, origin: ArrayLike | None = None) -> FloatArray:
     """Inverse of :func:`to_pilot`: a pilot-frame state back into the inertial frame A.
 
     Parameters

@@ -343,8 +343,8 @@ def vertex_check(
 
 
 def largest_sigma(
-    test: str = "vertex",
     *,
+    test: str = "vertex",
     params: ARDrone2Params = ARDRONE2,
     gains: ControllerGains | None = None,
     arm: float | None = None,
@@ -405,7 +405,7 @@ def largest_sigma(
     if math.isinf(hi):  # no spread in c or d: every n gives the nominal motors
         return math.inf if passes(lo) else 0.0
     if test == "lyapunov":  # a common P needs stable vertices: start below the vertex edge
-        hi = min(hi, largest_sigma("vertex", params=params, gains=g, arm=arm,
+        hi = min(hi, largest_sigma(test="vertex", params=params, gains=g, arm=arm,
                                    integral=integral, tol=step) + step)
     if not passes(lo):
         return 0.0

@@ -312,7 +312,7 @@ class PositionVelocityKF:
         return [(t, x.copy(), p.copy()) for t, x, p in zip(self._ts, self._xs, self._Ps)]
 
     # ----------------------------------------------------------------------------- predict
-    def transition(self, dt: float,
+    def transition(self, dt: float, *,
                    accel_std: float | None = None) -> tuple[FloatArray, FloatArray]:
         """``F`` and ``Q`` (dim_x, dim_x) of a step of ``dt`` seconds (>= 0).
 

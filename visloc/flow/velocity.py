@@ -22,7 +22,7 @@ from flow rates.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import KW_ONLY, dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -264,6 +264,7 @@ class EgoMotion:
     """
 
     camera: Camera
+    _: KW_ONLY
     height: float | None = None
     fps: float | None = None
     options: dict = field(default_factory=dict)

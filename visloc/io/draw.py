@@ -126,6 +126,7 @@ def _corners(det: MarkerDetection, i: int) -> NDArray[np.float64]:
 def draw_markers(
     image: NDArray[np.uint8],
     detections: Sequence[MarkerDetection],
+    *,
     poses: Sequence[Any | None] | None = None,
     camera: Any | None = None,
     marker_length: float | None = None,

@@ -67,7 +67,7 @@ def load_pymavlink():
     return mavutil, common
 
 
-def body_attitude_ned(R_map_cam: ArrayLike, map_frame: str = "nwu",
+def body_attitude_ned(R_map_cam: ArrayLike, *, map_frame: str = "nwu",
                       R_body_cam: ArrayLike = DOWN_CAMERA) -> NDArray[np.float64]:
     """The body's attitude in NED from the camera's in the map.
 

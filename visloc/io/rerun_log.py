@@ -97,8 +97,8 @@ class RerunLogger(Closing):
     def __init__(
         self,
         path: str | os.PathLike[str],
-        app_id: str = "visloc",
         *,
+        app_id: str = "visloc",
         jpeg_quality: int | None = None,
     ) -> None:
         if not isinstance(path, (str, os.PathLike)):
@@ -138,6 +138,7 @@ class RerunLogger(Closing):
         time: float,
         image: NDArray[np.uint8] | None,
         detections: Sequence[MarkerDetection],
+        *,
         poses: Sequence[Any | None] | None = None,
         camera: Any | None = None,
         marker_length: float | None = None,

@@ -34,7 +34,7 @@ VIDEO_FOURCC: dict[str, str] = {".mp4": "mp4v", ".avi": "MJPG"}
 """Codec used by :class:`AnnotationSink` for each video extension."""
 
 
-def to_jsonable(obj: Any, _where: str = "obj") -> Any:
+def to_jsonable(obj: Any, *, _where: str = "obj") -> Any:
     """Convert ``obj`` recursively into plain JSON types.
 
     numpy scalars become Python numbers, arrays become nested lists, tuples and sets become
@@ -74,13 +74,13 @@ def to_jsonable(obj: Any, _where: str = "obj") -> Any:
             if not isinstance(item, np.floating):
                 raise TypeError(f"{_where} has type {type(obj).__name__}, which cannot be written as JSON")
             item = float(item)
-        return to_jsonable(item, _where)
+        return to_jsonable(item, _where=_where)
     if isinstance(obj, np.ndarray):
         if obj.dtype == np.longdouble:
             obj = obj.astype(np.float64)
-        return to_jsonable(obj.tolist(), _where)
+        return to_jsonable(obj.tolist(), _where=_where)
     if isinstance(obj, Mapping):
-        out = {_json_key(k, _where): to_jsonable(v, f"{_where}[{k!r}]") for k, v in obj.items()}
+        out = {_json_key(k, _where): to_jsonable(v, _where=f"{_where}[{k!r}]") for k, v in obj.items()}
         if len(out) != len(obj):  # two keys with one string form: one value would be lost
             seen: dict[str, object] = {}
             for k in obj:
@@ -89,15 +89,15 @@ def to_jsonable(obj: Any, _where: str = "obj") -> Any:
                 seen[key] = k
         return out
     if isinstance(obj, (list, tuple)):
-        return [to_jsonable(v, f"{_where}[{i}]") for i, v in enumerate(obj)]
+        return [to_jsonable(v, _where=f"{_where}[{i}]") for i, v in enumerate(obj)]
     if isinstance(obj, (set, frozenset)):
-        return [to_jsonable(v, _where) for v in sorted(obj, key=repr)]
+        return [to_jsonable(v, _where=_where) for v in sorted(obj, key=repr)]
     if isinstance(obj, os.PathLike):
         return os.fspath(obj)
     if callable(getattr(obj, "to_dict", None)):
-        return to_jsonable(obj.to_dict(), _where)
+        return to_jsonable(obj.to_dict(), _where=_where)
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        return to_jsonable(dataclasses.asdict(obj), _where)
+        return to_jsonable(dataclasses.asdict(obj), _where=_where)
     raise TypeError(f"{_where} has type {type(obj).__name__}, which cannot be written as JSON")
 
 
@@ -198,7 +198,7 @@ class JsonlWriter(Closing):
 
 
 def _csv_value(value: Any) -> Any:
-    value = to_jsonable(value, "value")
+    value = to_jsonable(value, _where="value")
     if value is None:
         return ""
     if isinstance(value, (list, dict)):
@@ -324,7 +324,7 @@ class AnnotationSink(Closing):
         another kind of file (``.png``, ``.txt``, ``.mkv``, ...).
     """
 
-    def __init__(self, target: str | os.PathLike[str], fps: float = 30.0) -> None:
+    def __init__(self, target: str | os.PathLike[str], *, fps: float = 30.0) -> None:
         if not isinstance(target, (str, os.PathLike)):
             raise TypeError(f"target must be a str or os.PathLike, got {type(target).__name__}")
         if isinstance(fps, bool) or not isinstance(fps, (int, float, np.integer, np.floating)):

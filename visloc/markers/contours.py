@@ -175,7 +175,7 @@ def find_contours(binary: NDArray[np.uint8], *, enclosing: bool = False) -> list
     return [contours[i] for i in np.flatnonzero(holes)]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class CandidateFilter:
     """Bounds a contour must meet to be a marker candidate (stage 5).
 

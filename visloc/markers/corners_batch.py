@@ -130,8 +130,8 @@ def _peaks(d: NDArray, n: NDArray, valid: NDArray, count: int = 4) -> tuple[NDAr
 
 def fit_quads(
     contours: list[NDArray],
-    hints: NDArray | None = None,
     *,
+    hints: NDArray | None = None,
     sigma: float | None = None,
     padding: float = 0.1,
     splits: bool = False,

@@ -68,7 +68,7 @@ _FOUR = np.arange(4)
 __all__ = ["FAST_PASSES", "CandidateTrace", "DetectionTrace", "DetectorParams", "MarkerDetector", "PassTrace", "SearchPass"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class SearchPass:
     """One candidate search (stages 2-7).
 
@@ -91,10 +91,10 @@ class SearchPass:
 
 #: Search passes trading recall on the smallest markers for speed: the fine pass on an image
 #: shrunk 1.5 times, the coarse pass at 3 times (``MarkerDetector(d, passes=FAST_PASSES)``).
-FAST_PASSES = (SearchPass(1.5, 9), SearchPass(3.0, 9))
+FAST_PASSES = (SearchPass(scale=1.5, window=9), SearchPass(scale=3.0, window=9))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class DetectorParams:
     """Parameters of :class:`MarkerDetector` (defaults chosen with ``bench/markers.py``).
 
@@ -240,9 +240,11 @@ class DetectorParams:
         0.01 px, slower), or the compiled ones where they were built (``None``, the default).
     """
 
-    passes: tuple[SearchPass, ...] = (SearchPass(1.0, 9), SearchPass(1.5, 11), SearchPass(4.0, 9))
-    dark_passes: tuple[SearchPass, ...] = (SearchPass(1.0, 9), SearchPass(1.5, 11), SearchPass(4.0, 9, 4.0),
-                                           SearchPass(3.0, 9, 4.0))
+    passes: tuple[SearchPass, ...] = (SearchPass(scale=1.0, window=9), SearchPass(scale=1.5, window=11),
+                                      SearchPass(scale=4.0, window=9))
+    dark_passes: tuple[SearchPass, ...] = (SearchPass(scale=1.0, window=9), SearchPass(scale=1.5, window=11),
+                                           SearchPass(scale=4.0, window=9, offset=4.0),
+                                           SearchPass(scale=3.0, window=9, offset=4.0))
     dark_mean: float = 50.0
     min_pass_size: int = 100
     erode: int = 0
@@ -765,7 +767,7 @@ class MarkerDetector:
                     _note(log, contours[i], float(scale[i, 0, 0]), None, None, None, None, None, "bits")
             keep = fresh[looks[fresh]]
             hints = (approx[keep] + 0.5) / scale[keep] - 0.5
-            quads, fitted, splits = fit_quads([contours[i] for i in keep], hints, sigma=p.corner_sigma,
+            quads, fitted, splits = fit_quads([contours[i] for i in keep], hints=hints, sigma=p.corner_sigma,
                                               padding=p.corner_padding, splits=log is not None,
                                               native=p.native)  # 6-7
             full = (quads + 0.5) * scale[keep] - 0.5  # to full-resolution pixel centres
@@ -985,15 +987,21 @@ def _check_params(p: DetectorParams) -> None:
 
 
 def _as_pass(p: object) -> SearchPass:
-    sp = p if isinstance(p, SearchPass) else SearchPass(*p)  # type: ignore[misc]
+    if isinstance(p, SearchPass):
+        sp = p
+    else:  # (scale[, window[, offset]])
+        values = tuple(p)  # type: ignore[call-overload]
+        if len(values) > 3:
+            raise ValueError(f"passes: a pass is a SearchPass or (scale[, window[, offset]]), got {p!r}")
+        sp = SearchPass(**dict(zip(("scale", "window", "offset"), values, strict=False)))
     if not isinstance(sp.scale, (int, float, np.integer, np.floating)) or not 1 <= sp.scale < math.inf:
         raise ValueError(f"passes: scale must be >= 1, got {sp.scale}")
     if sp.window is not None and (sp.window < 3 or sp.window % 2 == 0):
         raise ValueError(f"passes: window must be an odd integer >= 3, got {sp.window}")
     if sp.offset is not None and not np.isfinite(sp.offset):
         raise ValueError(f"passes: offset must be a finite number, got {sp.offset}")
-    return SearchPass(float(sp.scale), None if sp.window is None else int(sp.window),
-                      None if sp.offset is None else float(sp.offset))
+    return SearchPass(scale=float(sp.scale), window=None if sp.window is None else int(sp.window),
+                      offset=None if sp.offset is None else float(sp.offset))
 
 
 def _note(log: dict | None, contour, scale, split, quad, cells, bits, det, stage: str) -> None:

@@ -65,7 +65,7 @@ class Dictionary:
     def __len__(self) -> int:
         return int(self.bits.shape[0])
 
-    def marker_image(self, marker_id: int, cell_px: int = 10, border_bits: int = 1) -> NDArray[np.uint8]:
+    def marker_image(self, marker_id: int, *, cell_px: int = 10, border_bits: int = 1) -> NDArray[np.uint8]:
         """Draw marker ``marker_id`` as a uint8 image, black border included, no white margin.
 
         The image is ``(s + 2 * border_bits) * cell_px`` pixels square, 0 = black, 255 = white.

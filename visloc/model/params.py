@@ -18,7 +18,7 @@ from visloc.types import FloatArray
 _TUPLE_FIELDS = ("inertia_no_hull", "inertia_hull_markers", "c_quad3", "c_quad4", "d_quad4")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ARDrone2Params:
     """AR.Drone 2.0 (TU/e Parrot quad number 3) with its protective indoor hull.
 

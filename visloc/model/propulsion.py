@@ -314,10 +314,10 @@ def pwm_from_inputs(
         s = np.linalg.solve(g, u)  # Gamma^-1 u, report eq. (4.6)
     except np.linalg.LinAlgError as exc:
         raise ValueError("gamma: the mixer matrix is singular") from exc
-    return pwm_from_bar(s, params.k, pwm_max)
+    return pwm_from_bar(s, params.k, pwm_max=pwm_max)
 
 
-def pwm_from_bar(bar: FloatArray, k: float, pwm_max: float = 100.0) -> PwmResult:
+def pwm_from_bar(bar: FloatArray, k: float, *, pwm_max: float = 100.0) -> PwmResult:
     """The commands ``pwm = sqrt(bar) - k`` of requested squared terms ``bar = Gamma^-1 u``,
     saturated as :func:`pwm_from_inputs` says (whose second half this is; a controller that
     keeps ``Gamma^-1`` calls it directly). Arguments are not checked.

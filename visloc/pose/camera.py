@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field
+from dataclasses import KW_ONLY, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -84,6 +84,7 @@ class Camera:
     K: FloatArray
     dist: FloatArray | None = None
     size: tuple[int, int] | None = None
+    _: KW_ONLY
     model: str = "pinhole"
     _distorted: bool = field(init=False, default=False, repr=False)
 
@@ -255,7 +256,7 @@ class Camera:
             )
         try:
             return cls(
-                K, None if dist is None or dist.size == 0 else dist, None if w is None else (w, h), model
+                K, None if dist is None or dist.size == 0 else dist, None if w is None else (w, h), model=model
             )
         except ValueError as exc:
             raise ValueError(f"camera file {str(path)!r}: {exc}") from None
@@ -367,7 +368,7 @@ class Camera:
         K[1, 1] *= sy
         K[0, 2] = (K[0, 2] + 0.5) * sx - 0.5
         K[1, 2] = (K[1, 2] + 0.5) * sy - 0.5
-        return Camera(K, self.dist.copy(), (int(width), int(height)), self.model)
+        return Camera(K, self.dist.copy(), (int(width), int(height)), model=self.model)
 
     # ------------------------------------------------------------------ point mappings
     def normalize(self, points: ArrayLike) -> FloatArray:

@@ -182,7 +182,7 @@ class VisionEstimator:
         self._last_pose = None if fix is None else fix.pose
         return None if fix is None else (fix.pose, fix.position_covariance)
 
-    def ultrasound(self, t: float, reading: float, std: float = 0.01) -> bool:
+    def ultrasound(self, t: float, reading: float, *, std: float = 0.01) -> bool:
         """Correct the height with one ultrasound reading (report §3.2.1).
 
         The reading becomes a distance along the beam by report eq. (3.13)

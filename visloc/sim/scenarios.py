@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import KW_ONLY, dataclass
 
 import numpy as np
 
@@ -59,6 +59,7 @@ class Scenario:
     name: str
     description: str
     seconds: float
+    _: KW_ONLY
     step: tuple[float, FloatArray] | None = None
     push: tuple[float, float, FloatArray] | None = None
     estimator: str = "truth"

@@ -38,7 +38,7 @@ FloatArray = NDArray[np.float64]
 _TOL = 1e-10
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class CameraEffects:
     """What a camera does to the ideal image; the defaults give a typical webcam.
 

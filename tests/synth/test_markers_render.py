@@ -121,6 +121,32 @@ def test_polygon_coverage_is_exact():
             assert cov.sum() == pytest.approx(area, abs=1e-9)
 
 
+def test_coverages_of_many_grids_at_once_are_each_grids_own_to_the_bit():
+    from visloc.synth.raster import edge_coverage, polygon_edges, window_coverages
+
+    rng = np.random.default_rng(3)
+    sets, shapes = [], []
+    for k in range(7):  # convex polygons, holes, parts outside, some grids empty of edges
+        shape = (int(rng.integers(1, 25)), int(rng.integers(1, 25)))
+        polys, weights = [], []
+        for _ in range(int(rng.integers(0, 4))):
+            pts = rng.uniform(-6, 30, (7, 2))
+            polys.append(pts[ConvexHull(pts).vertices])
+            weights.append(float(rng.choice([1.0, -1.0, 0.5])))
+        sets.append(polygon_edges(polys, weights))
+        shapes.append(shape)
+    window = np.concatenate([np.full(len(w), i) for i, (_, _, w) in enumerate(sets)])
+    together = window_coverages(np.concatenate([a for a, _, _ in sets]), np.concatenate([b for _, b, _ in sets]),
+                                np.concatenate([w for _, _, w in sets]), window, shapes)
+    for (a, b, w), shape, cov in zip(sets, shapes, together, strict=True):
+        assert cov.shape == shape
+        assert np.array_equal(cov, edge_coverage(a, b, w, shape))  # the same bits, not just close
+    with pytest.raises(ValueError, match="weights"):
+        polygon_edges([np.eye(3)[:, :2]], [1.0, 2.0])
+    with pytest.raises(ValueError, match="n, 2"):
+        polygon_edges([np.ones((4, 3))], [1.0])
+
+
 def test_corners_are_projections_of_the_pose():
     render = random_scene(np.random.default_rng(11), difficulty="hard", n_markers=4)
     assert len(render.markers) == 4

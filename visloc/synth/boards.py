@@ -34,7 +34,7 @@ from visloc.synth.markers import (
     _composite_exact,
     _finish,
     _ideal_background,
-    _marker_truth,
+    _marker_truths,
     _plane_polygons,
     faces_camera,
 )
@@ -224,11 +224,11 @@ def render_aprilgrid(
     s = spacing_ratio * L
     ids = list(range(first_id, first_id + n))
     canvas, bg_name, k_ideal = _ideal_background(k, (w, h), background, camera, gen)
-    markers = [  # tag frame: the board's axes at the tag's centre
-        _marker_truth(k, (w, h), camera, marker_id, Pose(R, R @ corners.mean(axis=0) + t), L)
+    markers = _marker_truths(k, (w, h), camera, [  # tag frame: the board's axes at the tag's centre
+        (marker_id, Pose(R, R @ corners.mean(axis=0) + t), L)
         for marker_id, corners in zip(ids, aprilgrid_tag_corners(rows, cols, L, spacing_ratio=spacing_ratio),
                                       strict=True)
-    ]
+    ])
     if faces_camera(pose):
         outer, polys, weights = _board_polygons(dic, ids, rows, cols, L, s)
         _composite_exact(canvas, k_ideal, pose, outer, polys, weights, 1e-6 * L)

@@ -101,8 +101,9 @@ def render_charuco(K: FloatArray, size: tuple[int, int], pose: Pose, board: Char
     canvas, _, k_ideal = _render._ideal_background(k, (w, h), None, camera, gen)
     s, L = board.square_length, board.marker_length
     centres = board.marker_corners.mean(axis=1) @ _FLIP  # face frame: y up
-    markers = [_render._marker_truth(k, (w, h), camera, int(mid), Pose(face.R, face.R @ c + face.t), L)
-               for mid, c in zip(board.marker_ids.tolist(), centres, strict=True)]
+    markers = _render._marker_truths(k, (w, h), camera, [(int(mid), Pose(face.R, face.R @ c + face.t), L)
+                                                         for mid, c in zip(board.marker_ids.tolist(), centres,
+                                                                           strict=True)])
     facing = bool(np.dot(face.t, face.R[:, 2]) < 0.0)
     if facing:
         outer, polys, weights = _board_polygons(board, dic, centres)
@@ -141,7 +142,7 @@ def _corner_truth(k: FloatArray, size: tuple[int, int], camera: CameraEffects | 
     uv = project_points(k, pose, points)
     in_front = pose.apply(points)[:, 2] > 0
     if camera is not None:
-        one_to_one = np.array([_render._within_radius(p[None], k, monotonic_radius(camera.k1, camera.k2)) for p in uv])
+        one_to_one = _render._within_radius(uv[:, None], k, monotonic_radius(camera.k1, camera.k2))
         uv = distort_points(uv, k, camera.k1, camera.k2)
         in_front &= one_to_one
     inside = np.isfinite(uv).all(axis=1) & (uv >= VISIBLE_MARGIN - 0.5).all(axis=1) & (

@@ -41,7 +41,7 @@ from visloc.synth.camera import (
     monotonic_radius,
     srgb_decode,
 )
-from visloc.synth.raster import polygon_coverage
+from visloc.synth.raster import polygon_edges, window_coverages
 from visloc.synth.textures import degrade, make_background
 from visloc.types import Pose
 
@@ -220,6 +220,20 @@ def _polygons_of(bits_bytes: bytes, s: int, length: float, margin_cells: float):
     return outer, tuple(polys), tuple(weights)
 
 
+def _project_all(K: FloatArray, pose: Pose, polys: Sequence[FloatArray], near: float) -> list[FloatArray]:
+    """:func:`_project_clipped` of each plane polygon: all in one projection when every vertex
+    lies at ``z >= near`` (nothing to clip), else polygon by polygon."""
+    flat = np.zeros((sum(len(q) for q in polys), 3))
+    flat[:, :2] = np.concatenate(polys)
+    pts = pose.apply(flat)
+    if not np.all(pts[:, 2] >= near):
+        return [_project_clipped(K, pose, q, near) for q in polys]
+    uv = pts @ K.T
+    img = uv[:, :2] / uv[:, 2:3]
+    ends = np.cumsum([len(q) for q in polys]).tolist()
+    return [img[a:b] for a, b in zip([0, *ends[:-1]], ends, strict=True)]
+
+
 def _project_clipped(K: FloatArray, pose: Pose, poly: FloatArray, near: float) -> FloatArray:
     """Project a plane polygon (n, 2), clipped to the half-space ``z >= near``."""
     flat = np.zeros((len(poly), 3))  # the polygon on the plane z = 0
@@ -241,12 +255,6 @@ def _project_clipped(K: FloatArray, pose: Pose, poly: FloatArray, near: float) -
     return uv[:, :2] / uv[:, 2:3]
 
 
-def _draw_exact(canvas: FloatArray, K: FloatArray, pose: Pose, bits, length, margin) -> None:
-    """Composite one marker onto ``canvas`` in place with exact area coverage."""
-    outer, polys, weights = _plane_polygons(bits, length, margin)
-    _composite_exact(canvas, K, pose, outer, polys, weights, 1e-6 * length)
-
-
 def _composite_exact(canvas: FloatArray, K: FloatArray, pose: Pose, outer: FloatArray,
                      polys: Sequence[FloatArray], weights: Sequence[float], near: float) -> None:
     """Composite printed plane polygons onto ``canvas`` in place with exact area coverage.
@@ -255,25 +263,46 @@ def _composite_exact(canvas: FloatArray, K: FloatArray, pose: Pose, outer: Float
     ``sum(weights[k] * [inside polys[k]])`` is 1 and black where it is 0 (plane coordinates,
     clipped to ``z >= near`` in the camera).
     """
-    img_outer = _project_clipped(K, pose, outer, near)
-    if len(img_outer) == 0:
-        return
+    _composite_exact_many(canvas, K, [(pose, outer, polys, weights, near)])
+
+
+def _composite_exact_many(canvas: FloatArray, K: FloatArray,
+                          prints: Sequence[tuple[Pose, FloatArray, Sequence[FloatArray], Sequence[float], float]]
+                          ) -> None:
+    """:func:`_composite_exact` of each ``(pose, outer, polys, weights, near)`` in turn (later
+    ones over earlier ones), the coverages of all of them computed in one pass
+    (:func:`visloc.synth.raster.window_coverages`: each print's exactly as alone)."""
     h, w = canvas.shape
-    c0 = int(np.clip(np.floor(img_outer[:, 0].min() + 0.5), 0, w))
-    c1 = int(np.clip(np.ceil(img_outer[:, 0].max() + 0.5), 0, w))
-    r0 = int(np.clip(np.floor(img_outer[:, 1].min() + 0.5), 0, h))
-    r1 = int(np.clip(np.ceil(img_outer[:, 1].max() + 0.5), 0, h))
-    if c1 <= c0 or r1 <= r0:
+    starts, ends, wts, wins, shapes, placed = [], [], [], [], [], []
+    for pose, outer, polys, weights, near in prints:
+        img_outer = _project_clipped(K, pose, outer, near)
+        if len(img_outer) == 0:
+            continue
+        c0 = int(np.clip(np.floor(img_outer[:, 0].min() + 0.5), 0, w))
+        c1 = int(np.clip(np.ceil(img_outer[:, 0].max() + 0.5), 0, w))
+        r0 = int(np.clip(np.floor(img_outer[:, 1].min() + 0.5), 0, h))
+        r1 = int(np.clip(np.ceil(img_outer[:, 1].max() + 0.5), 0, h))
+        if c1 <= c0 or r1 <= r0:
+            continue
+        shift = np.array([c0, r0], float)
+        for polygons, poly_weights in (([img_outer - shift], [1.0]),  # alpha, then white
+                                       ([q - shift for q in _project_all(K, pose, polys, near)], weights)):
+            a, b, wt = polygon_edges(polygons, poly_weights)
+            starts.append(a)
+            ends.append(b)
+            wts.append(wt)
+            wins.append(np.full(len(wt), len(shapes), np.int64))
+            shapes.append((r1 - r0, c1 - c0))
+        placed.append((r0, r1, c0, c1))
+    if not placed:
         return
-    shift = np.array([c0, r0], float)
-    shape = (r1 - r0, c1 - c0)
-    alpha = polygon_coverage([img_outer - shift], [1.0], shape)
-    white = polygon_coverage(
-        [_project_clipped(K, pose, p, near) - shift for p in polys], weights, shape
-    )
-    view = canvas[r0:r1, c0:c1]
-    view *= 1.0 - alpha
-    view += BLACK * (alpha - white) + WHITE * white
+    cov = window_coverages(np.concatenate(starts), np.concatenate(ends), np.concatenate(wts),
+                           np.concatenate(wins), shapes)
+    for i, (r0, r1, c0, c1) in enumerate(placed):
+        alpha, white = cov[2 * i], cov[2 * i + 1]
+        view = canvas[r0:r1, c0:c1]
+        view *= 1.0 - alpha
+        view += BLACK * (alpha - white) + WHITE * white
 
 
 def _draw_sampled(canvas: FloatArray, K: FloatArray, pose: Pose, bits, length, margin, s: int):
@@ -316,13 +345,18 @@ def _check_placements(placements: object, dictionary: Dictionary) -> list[Placem
         pose = item[1]
         if np.shape(pose.R) != (3, 3) or np.shape(pose.t) != (3,):
             raise ValueError(f"placements[{i}] pose must have R (3, 3) and t (3,)")
-        R, t = np.asarray(pose.R, float), np.asarray(pose.t, float)
-        if not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))) or not np.allclose(
-                R.T @ R, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
-            # a NaN pose used to render as no marker at all, with NaN corners as its truth
-            raise ValueError(f"placements[{i}] pose: R must be a finite rotation matrix and t finite")
         length = check_number(item[2], f"placements[{i}] length", low=0.0, low_open=True)
         out.append((marker_id, Pose(np.asarray(pose.R, float), np.asarray(pose.t, float)), length))
+    if out:  # every pose a finite rotation (np.allclose(R^T R, I, atol=1e-6), det > 0), all at once
+        R = np.stack([pose.R for _, pose, _ in out])
+        t = np.stack([pose.t for _, pose, _ in out])
+        with np.errstate(invalid="ignore"):
+            ok = np.isfinite(R).all(axis=(1, 2)) & np.isfinite(t).all(axis=1)
+            ok &= (np.abs(R.mT @ R - np.eye(3)) <= 1e-6 + 1e-5 * np.eye(3)).all(axis=(1, 2))
+            ok &= ~(np.linalg.det(np.where(ok[:, None, None], R, np.eye(3))) < 0)
+        if not ok.all():  # a NaN pose used to render as no marker at all, with NaN corners as its truth
+            i = int(np.argmin(ok))
+            raise ValueError(f"placements[{i}] pose: R must be a finite rotation matrix and t finite")
     return out
 
 
@@ -414,16 +448,14 @@ def render_markers(
                                    motion_angle=motion_angle, noise_sigma=noise_sigma, gain=gain,
                                    gradient=gradient, jpeg_quality=jpeg_quality)
     bg, bg_name, k_ideal = _ideal_background(k, (w, h), background, camera, gen)
-    markers = [_marker_truth(k, (w, h), camera, marker_id, pose, length)
-               for marker_id, pose, length in items]
+    markers = _marker_truths(k, (w, h), camera, items)
 
     order = sorted(range(len(items)), key=lambda i: -float(np.linalg.norm(items[i][1].t)))
     drawn = [i for i in order if faces_camera(items[i][1])]
     if supersample is None:
         canvas = bg
-        for i in drawn:
-            marker_id, pose, length = items[i]
-            _draw_exact(canvas, k_ideal, pose, dic.bits[marker_id], length, margin_cells)
+        _composite_exact_many(canvas, k_ideal, [(pose, *_plane_polygons(dic.bits[marker_id], length, margin_cells),
+                                                 1e-6 * length) for marker_id, pose, length in (items[i] for i in drawn)])
     else:
         s = supersample
         hc, wc = bg.shape
@@ -458,23 +490,31 @@ def _ideal_background(
     return bg, bg_name, k_ideal
 
 
-def _marker_truth(k: FloatArray, size: tuple[int, int], camera: CameraEffects | None,
-                  marker_id: int, pose: Pose, length: float) -> RenderedMarker:
-    """Ground truth of one marker: (distorted) corner projections and visibility."""
+def _marker_truths(k: FloatArray, size: tuple[int, int], camera: CameraEffects | None,
+                   items: Sequence[Placement]) -> list[RenderedMarker]:
+    """Ground truth of each ``(id, pose, length)`` placement: its (distorted) corner
+    projections and whether it is visible (in front, inside the frame by
+    :data:`VISIBLE_MARGIN`, facing the camera, and with a lens model where the distortion is
+    one-to-one), all markers projected at once."""
+    if not items:
+        return []
     w, h = size
-    corners = project_points(k, pose, marker_object_points(length))
-    in_front = bool(np.all(pose.apply(marker_object_points(length))[:, 2] > 0))
+    obj = np.stack([marker_object_points(length) for _, _, length in items])  # (M, 4, 3)
+    pc = obj @ np.stack([pose.R for _, pose, _ in items]).mT + np.stack([pose.t for _, pose, _ in items])[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        uv = pc @ np.asarray(k, float).T
+        corners = uv[..., :2] / uv[..., 2:3]  # project_points of each
+    in_front = (pc[..., 2] > 0).all(axis=1)
     if camera is not None:
         one_to_one = _within_radius(corners, k, monotonic_radius(camera.k1, camera.k2))
-        corners = distort_points(corners, k, camera.k1, camera.k2)
-        in_front = in_front and one_to_one
-    inside = bool(
-        np.all(np.isfinite(corners))
-        and np.all(corners >= VISIBLE_MARGIN - 0.5)
-        and np.all(corners <= np.array([w, h]) - 0.5 - VISIBLE_MARGIN)
-    )
-    visible = in_front and inside and faces_camera(pose)
-    return RenderedMarker(marker_id, corners, pose, length, visible)
+        corners = distort_points(corners.reshape(-1, 2), k, camera.k1, camera.k2).reshape(-1, 4, 2)
+        in_front &= one_to_one
+    with np.errstate(invalid="ignore"):
+        inside = (np.isfinite(corners).all(axis=(1, 2)) & (corners >= VISIBLE_MARGIN - 0.5).all(axis=(1, 2))
+                  & (corners <= np.array([w, h]) - 0.5 - VISIBLE_MARGIN).all(axis=(1, 2)))
+    return [RenderedMarker(marker_id, c, pose, length, bool(front and ok) and faces_camera(pose))
+            for (marker_id, pose, length), c, front, ok in zip(items, corners, in_front.tolist(), inside.tolist(),
+                                                                strict=True)]
 
 
 def _finish(canvas: FloatArray, k: FloatArray, k_ideal: FloatArray, size: tuple[int, int],
@@ -564,11 +604,11 @@ def _camera_background(
     return srgb_decode(bg / 255.0) * 255.0, name
 
 
-def _within_radius(points: FloatArray, K: FloatArray, radius: float) -> bool:
-    """All pinhole points (N, 2) finite and closer than ``radius`` to the optical axis
-    (normalised coordinates)."""
-    if not np.all(np.isfinite(points)):
-        return False
-    y = (points[:, 1] - K[1, 2]) / K[1, 1]
-    x = (points[:, 0] - K[0, 2] - K[0, 1] * y) / K[0, 0]
-    return bool(np.all(np.hypot(x, y) < radius))
+def _within_radius(points: FloatArray, K: FloatArray, radius: float) -> NDArray[np.bool_]:
+    """For each set of pinhole points (..., N, 2): all finite and closer than ``radius`` to
+    the optical axis (normalised coordinates); shape ``points.shape[:-2]``."""
+    finite = np.isfinite(points).all(axis=(-2, -1))
+    y = (points[..., 1] - K[1, 2]) / K[1, 1]
+    x = (points[..., 0] - K[0, 2] - K[0, 1] * y) / K[0, 0]
+    with np.errstate(invalid="ignore"):  # (NaN points: not finite already)
+        return finite & (np.hypot(x, y) < radius).all(axis=-1)

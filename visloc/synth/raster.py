@@ -52,24 +52,30 @@ def polygon_edges(
     Raises
     ------
     ValueError
-        If ``polygons`` and ``weights`` differ in length.
+        If ``polygons`` and ``weights`` differ in length, or a polygon is not (n, 2).
     """
-    starts, ends, ws = [], [], []
-    for poly, w in zip(polygons, weights, strict=True):
-        p = np.asarray(poly, np.float64)
-        if p.shape[0] < 3:
-            continue
-        q = np.concatenate((p[1:], p[:1]))  # np.roll(p, -1, axis=0): the next vertex
-        twice_area = float(np.sum(p[:, 0] * q[:, 1] - q[:, 0] * p[:, 1]))
-        if twice_area == 0.0:
-            continue
-        starts.append(p)
-        ends.append(q)
-        ws.append(np.full(p.shape[0], -float(w) * np.sign(twice_area)))
-    if not starts:
+    polys = [np.asarray(poly, np.float64) for poly in polygons]
+    polys = [q.reshape(0, 2) if q.size == 0 else q for q in polys]
+    if any(q.ndim != 2 or q.shape[1] != 2 for q in polys):
+        raise ValueError("polygons: each must be an (n, 2) array of vertices")
+    w = np.array([float(v) for v in weights], np.float64)
+    if len(w) != len(polys):
+        raise ValueError(f"polygons and weights differ in length: {len(polys)} and {len(w)}")
+    sizes = np.array([len(q) for q in polys], np.int64)
+    kept = sizes >= 3
+    if not kept.any():
         empty = np.zeros((0, 2))
         return empty, empty.copy(), np.zeros(0)
-    return np.concatenate(starts), np.concatenate(ends), np.concatenate(ws)
+    p = np.concatenate([q for q, k in zip(polys, kept.tolist(), strict=True) if k])
+    n = sizes[kept]
+    first = np.cumsum(n) - n
+    nxt = np.arange(len(p)) + 1  # each vertex's next one, the last back to its polygon's first
+    nxt[first + n - 1] = first
+    q = p[nxt]
+    twice_area = np.add.reduceat(p[:, 0] * q[:, 1] - q[:, 0] * p[:, 1], first)  # (the same sums, in order)
+    edge_weight = np.repeat(-w[kept] * np.sign(twice_area), n)
+    nonzero = np.repeat(twice_area != 0.0, n)  # degenerate polygons add nothing
+    return p[nonzero], q[nonzero], edge_weight[nonzero]
 
 
 def _ramp_integral(z: FloatArray) -> FloatArray:
@@ -98,23 +104,62 @@ def edge_coverage(
     ndarray (height, width) float64
         ``sum_k w_k * area(pixel ∩ polygon_k)`` for every pixel (pixel area 1).
     """
-    h, w = int(shape[0]), int(shape[1])
-    out_w = w + 1  # column w collects contributions that only reach pixels right of the image
+    return window_coverages(start, end, weight, np.zeros(len(weight), np.int64), [shape])[0]
+
+
+def window_coverages(start: FloatArray, end: FloatArray, weight: FloatArray, window: NDArray[np.int64],
+                     shapes: Sequence[tuple[int, int]]) -> list[FloatArray]:
+    """:func:`edge_coverage` of several pixel grids at once: edge ``e`` belongs to grid
+    ``window[e]`` (its coordinates in that grid's pixels), and grid ``i`` is ``shapes[i]``
+    ``(height, width)``. Each grid's coverage is what :func:`edge_coverage` gives for its own
+    edges alone, to the bit (the same operations on each edge, and each pixel's sum taken
+    over the same terms in the same order), in one pass of array operations for all grids.
+
+    Parameters
+    ----------
+    start, end : ndarray (E, 2)
+        Edge end points, px (as :func:`edge_coverage`).
+    weight : ndarray (E,)
+        Edge weights.
+    window : ndarray (E,) int
+        Index into ``shapes`` of each edge's grid.
+    shapes : sequence of (int, int)
+        ``(height, width)`` of each grid.
+
+    Returns
+    -------
+    list of ndarray (height_i, width_i) float64
+        The coverage of each grid, in the order of ``shapes``.
+    """
+    dims = np.array(shapes, np.int64).reshape(-1, 2)
+    heights, widths = dims[:, 0], dims[:, 1]
+    sizes = heights * (widths + 1)  # column w collects contributions that only reach pixels right of the grid
+    bases = np.cumsum(sizes) - sizes
     x0, y0 = start[:, 0] + 0.5, start[:, 1] + 0.5
     x1, y1 = end[:, 0] + 0.5, end[:, 1] + 0.5
     keep = (y0 != y1) & (weight != 0.0)
-    x0, y0, x1, y1, wt = x0[keep], y0[keep], x1[keep], y1[keep], weight[keep]
-    if x0.size == 0:
-        return np.zeros((h, w))
+    x0, y0, x1, y1, wt, win = x0[keep], y0[keep], x1[keep], y1[keep], weight[keep], np.asarray(window)[keep]
+    acc = np.zeros(int(sizes.sum()))
+    if x0.size:
+        acc = _accumulate(x0, y0, x1, y1, wt, win, heights, widths, bases, acc.size)
+    return [np.cumsum(acc[b: b + hw].reshape(h, w + 1), axis=1)[:, :w]
+            for b, hw, h, w in zip(bases.tolist(), sizes.tolist(), heights.tolist(), widths.tolist(), strict=True)]
 
+
+def _accumulate(x0: FloatArray, y0: FloatArray, x1: FloatArray, y1: FloatArray, wt: FloatArray,
+                win: NDArray[np.int64], heights: NDArray[np.int64], widths: NDArray[np.int64],
+                bases: NDArray[np.int64], total: int) -> FloatArray:
+    """The flat accumulation buffer of :func:`window_coverages` (before the sums along each
+    row) for edges ``(x0, y0) -> (x1, y1)`` shifted by half a pixel, none horizontal."""
+    h_e = heights[win]
     # Split every edge into pieces, one per pixel row it crosses.
     ylo, yhi = np.minimum(y0, y1), np.maximum(y0, y1)
-    r_first = np.clip(np.floor(ylo), 0, h).astype(np.int64)
-    r_stop = np.clip(np.ceil(yhi), 0, h).astype(np.int64)
+    r_first = np.clip(np.floor(ylo), 0, h_e).astype(np.int64)
+    r_stop = np.clip(np.ceil(yhi), 0, h_e).astype(np.int64)
     n_rows = np.maximum(r_stop - r_first, 0)
     e = np.repeat(np.arange(x0.size), n_rows)
     if e.size == 0:
-        return np.zeros((h, w))
+        return np.zeros(total)
     row = r_first[e] + np.arange(e.size) - np.repeat(np.cumsum(n_rows) - n_rows, n_rows)
     ya = np.maximum(ylo[e], row)
     yb = np.minimum(yhi[e], row + 1.0)
@@ -124,7 +169,9 @@ def edge_coverage(
     xb = np.clip(x0[e] + (yb - y0[e]) * slope[e], xlo_e, xhi_e)
     dy = (yb - ya) * np.sign(y1 - y0)[e] * wt[e]
     good = yb > ya
-    row, xa, xb, dy = row[good], xa[good], xb[good], dy[good]
+    row, xa, xb, dy, piece_win = row[good], xa[good], xb[good], dy[good], win[e][good]
+    w = widths[piece_win]
+    start_of_row = bases[piece_win] + row * (w + 1)  # the piece's row in the flat buffer
 
     # Per piece, G(j) = dy * int clamp(j + 1 - x(y), 0, 1) dy / dy is the coverage it adds
     # to column j; it is 0 left of the piece and dy right of it. Scatter G's differences.
@@ -150,10 +197,9 @@ def edge_coverage(
     tail = dy.copy()
     tail[has] -= g[(first + n_cols - 1)[has]]
 
-    idx = np.concatenate([row[p] * out_w + j, row * out_w + np.minimum(tail_col, w)])
+    idx = np.concatenate([start_of_row[p] + j, start_of_row + np.minimum(tail_col, w)])
     val = np.concatenate([diff, tail])
-    acc = np.bincount(idx, weights=val, minlength=h * out_w).reshape(h, out_w)
-    return np.cumsum(acc, axis=1)[:, :w]
+    return np.bincount(idx, weights=val, minlength=total)
 
 
 def polygon_coverage(

@@ -993,7 +993,7 @@ def _as_pass(p: object) -> SearchPass:
         values = tuple(p)  # type: ignore[call-overload]
         if len(values) > 3:
             raise ValueError(f"passes: a pass is a SearchPass or (scale[, window[, offset]]), got {p!r}")
-        sp = SearchPass(**dict(zip(("scale", "window", "offset"), values, strict=False)))
+        sp = SearchPass(**{f.name: v for f, v in zip(fields(SearchPass), values, strict=False)})
     if not isinstance(sp.scale, (int, float, np.integer, np.floating)) or not 1 <= sp.scale < math.inf:
         raise ValueError(f"passes: scale must be >= 1, got {sp.scale}")
     if sp.window is not None and (sp.window < 3 or sp.window % 2 == 0):

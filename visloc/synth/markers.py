@@ -223,14 +223,14 @@ def _polygons_of(bits_bytes: bytes, s: int, length: float, margin_cells: float):
 def _project_all(K: FloatArray, pose: Pose, polys: Sequence[FloatArray], near: float) -> list[FloatArray]:
     """:func:`_project_clipped` of each plane polygon: all in one projection when every vertex
     lies at ``z >= near`` (nothing to clip), else polygon by polygon."""
-    flat = np.zeros((sum(len(q) for q in polys), 3))
+    ends = np.cumsum([len(q) for q in polys]).tolist()
+    flat = np.zeros((ends[-1], 3))  # (a print has at least its outer square)
     flat[:, :2] = np.concatenate(polys)
     pts = pose.apply(flat)
     if not np.all(pts[:, 2] >= near):
         return [_project_clipped(K, pose, q, near) for q in polys]
     uv = pts @ K.T
     img = uv[:, :2] / uv[:, 2:3]
-    ends = np.cumsum([len(q) for q in polys]).tolist()
     return [img[a:b] for a, b in zip([0, *ends[:-1]], ends, strict=True)]
 
 

@@ -139,9 +139,8 @@ def window_coverages(start: FloatArray, end: FloatArray, weight: FloatArray, win
     x1, y1 = end[:, 0] + 0.5, end[:, 1] + 0.5
     keep = (y0 != y1) & (weight != 0.0)
     x0, y0, x1, y1, wt, win = x0[keep], y0[keep], x1[keep], y1[keep], weight[keep], np.asarray(window)[keep]
-    acc = np.zeros(int(sizes.sum()))
-    if x0.size:
-        acc = _accumulate(x0, y0, x1, y1, wt, win, heights, widths, bases, acc.size)
+    total = int(sizes.sum())
+    acc = _accumulate(x0, y0, x1, y1, wt, win, heights, widths, bases, total) if x0.size else np.zeros(total)
     return [np.cumsum(acc[b: b + hw].reshape(h, w + 1), axis=1)[:, :w]
             for b, hw, h, w in zip(bases.tolist(), sizes.tolist(), heights.tolist(), widths.tolist(), strict=True)]
 

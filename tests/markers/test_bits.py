@@ -169,6 +169,30 @@ def test_decode_refuses_values_other_than_0_and_1():
             assert np.array_equal(a, b) and a.dtype == b.dtype
 
 
+@pytest.mark.parametrize("name", ["DICT_4X4_50", "DICT_6X6_250", "DICT_7X7_1000", "DICT_APRILTAG_36h11"])
+def test_compiled_and_numpy_decodes_are_the_same(name):
+    """The compiled match (``_cells.match_codes``) gives numpy's ids, shifts, distances and
+    verdicts: on the markers themselves in all four turns, on them with bits flipped (ties
+    between codes included: the first closest wins in both) and on random grids."""
+    from visloc.markers.bits import NATIVE_CELLS
+
+    if not NATIVE_CELLS:
+        pytest.skip("visloc.markers._cells was not built (no C compiler at install)")
+    d = load_dictionary(name)
+    rng = np.random.default_rng(7)
+    s = d.marker_size
+    turned = np.concatenate([np.rot90(d.bits[:40], r, axes=(1, 2)) for r in range(4)])
+    flipped = turned ^ (rng.random(turned.shape) < 0.12)
+    grids = np.concatenate([turned, flipped, rng.integers(0, 2, (500, s, s))]).astype(np.uint8)
+    for bits in (grids, grids.astype(bool)):
+        native, numpy_ = decode(bits, d, native=True), decode(bits, d, native=False)
+        for a, b in zip(native, numpy_, strict=True):
+            assert a.dtype == b.dtype and np.array_equal(a, b)
+    assert native[3][:160].all() and np.array_equal(native[1][:160], np.repeat([0, 3, 2, 1], 40))
+    with pytest.raises(ValueError, match="bits must hold only 0 and 1, got 2"):
+        decode(np.full((2, s, s), 2, np.uint8), d, native=True)
+
+
 def test_decode_of_no_candidates_is_empty():
     d = load_dictionary("DICT_4X4_50")
     ids, shift, hamming, ok = decode(np.zeros((0, 4, 4), np.uint8), d)

@@ -1,4 +1,5 @@
-/* Stage 9 accelerator: the read of sampled cells into bits (visloc.markers.bits.read_cells).
+/* Stages 9-10 accelerator: the read of sampled cells into bits (visloc.markers.bits.read_cells)
+ * and their match against the dictionary (bits.decode).
  *
  * For each candidate, from its cells' grey-level samples and its ring's means (as
  * bits.sample_cells gives them): each cell's mean, Otsu's split of the cell and ring means, each
@@ -18,6 +19,14 @@
  *     row) on each quad (K x 4 x 2 float64), K x P float32 each: bits.square_to_quad in double
  *     precision, cast to float, the points mapped in single precision as bits._map_points maps
  *     them, operation for operation: the same maps.
+ *
+ * And the dictionary match (bits.decode):
+ *
+ * match_codes(bits, K, codes, max_bits, out, ok) -> bool
+ *     bits: K x s2 uint8 (0/1); codes: N x 4 uint64 (the dictionary's, id then rotation);
+ *     per candidate the first closest code (np.argmin's pick): its id, the corner shift
+ *     (4 - rotation) % 4 and distance into out (3 x K Py_ssize_t), whether that is at most
+ *     max_bits into ok (K bytes); False when a bit is neither 0 nor 1 (the caller raises).
  *
  * And the sums over the samples read through those maps:
  *
@@ -300,6 +309,98 @@ static PyObject *white_fractions(PyObject *self, PyObject *args) {
     return out;
 }
 
+/* The index of the first of the nc codes closest to code, and its distance into *low. The
+ * popcnt instruction where the processor has it (checked once at run time; without it the
+ * compiler's bit counting is ten times slower), else that bit counting. */
+#define CLOSEST_BODY                                  \
+    Py_ssize_t best = 0;                              \
+    int d0 = 65;                                      \
+    for (Py_ssize_t j = 0; j < nc; j++) {             \
+        int d = __builtin_popcountll(code ^ c[j]);    \
+        if (d < d0) {                                 \
+            d0 = d;                                   \
+            best = j;                                 \
+        }                                             \
+    }                                                 \
+    *low = d0;                                        \
+    return best;
+#if (defined(__GNUC__) || defined(__clang__)) && (defined(__x86_64__) || defined(__i386__))
+__attribute__((target("popcnt"))) static Py_ssize_t closest_popcnt(uint64_t code, const uint64_t *c, Py_ssize_t nc,
+                                                                   int *low) {
+    CLOSEST_BODY
+}
+#define HAVE_POPCNT_TARGET 1
+#endif
+#if defined(__GNUC__) || defined(__clang__)
+static Py_ssize_t closest_generic(uint64_t code, const uint64_t *c, Py_ssize_t nc, int *low) { CLOSEST_BODY }
+#else
+static Py_ssize_t closest_generic(uint64_t code, const uint64_t *c, Py_ssize_t nc, int *low) {
+    Py_ssize_t best = 0;
+    int d0 = 65;
+    for (Py_ssize_t j = 0; j < nc; j++) {
+        int d = 0;
+        for (uint64_t v = code ^ c[j]; v; v &= v - 1) d++;
+        if (d < d0) {
+            d0 = d;
+            best = j;
+        }
+    }
+    *low = d0;
+    return best;
+}
+#endif
+
+/* bits.decode: each candidate's s2 bits (0/1, cell i is bit i of its code) against the
+ * dictionary's N x 4 codes (id, then rotation); the first closest code wins, as argmin picks
+ * it. Written into out (3 x K Py_ssize_t: ids, corner shifts (4 - rotation) % 4, Hamming
+ * distances) and ok (K bytes: distance at most max_bits); returns False (nothing written past
+ * it) when a bit is neither 0 nor 1. */
+static PyObject *match_codes(PyObject *self, PyObject *args) {
+    (void)self;
+    Py_buffer bits, codes, out, ok;
+    Py_ssize_t K, max_bits;
+    if (!PyArg_ParseTuple(args, "y*ny*nw*w*", &bits, &K, &codes, &max_bits, &out, &ok)) return NULL;
+    PyObject *result = NULL;
+    Py_ssize_t s2 = K > 0 ? bits.len / K : 0, nc = codes.len / (Py_ssize_t)sizeof(uint64_t);
+    if (K < 1 || bits.len != K * s2 || s2 < 1 || s2 > 64 || nc < 4 || nc % 4 ||
+        codes.len != nc * (Py_ssize_t)sizeof(uint64_t) || out.len != 3 * K * (Py_ssize_t)sizeof(Py_ssize_t) ||
+        ok.len != K) {
+        PyErr_SetString(PyExc_ValueError, "match_codes: expected K >= 1 x s2 uint8 bits (s2 <= 64), N x 4 uint64 "
+                                          "codes, 3 x K intp and K bool outputs");
+    } else {
+        const uint8_t *b = (const uint8_t *)bits.buf;
+        const uint64_t *c = (const uint64_t *)codes.buf;
+        Py_ssize_t *io = (Py_ssize_t *)out.buf, *so = io + K, *ho = io + 2 * K;
+        uint8_t *oo = (uint8_t *)ok.buf;
+        int binary = 1;
+        Py_ssize_t (*closest)(uint64_t, const uint64_t *, Py_ssize_t, int *) = closest_generic;
+#ifdef HAVE_POPCNT_TARGET
+        if (__builtin_cpu_supports("popcnt")) closest = closest_popcnt;
+#endif
+        Py_BEGIN_ALLOW_THREADS
+        for (Py_ssize_t k = 0; k < K && binary; k++) {
+            uint64_t code = 0;
+            for (Py_ssize_t i = 0; i < s2; i++) {
+                binary &= b[k * s2 + i] <= 1;
+                code |= (uint64_t)(b[k * s2 + i] & 1) << i;
+            }
+            int low;
+            Py_ssize_t best = closest(code, c, nc, &low);
+            io[k] = best / 4;
+            so[k] = (4 - best % 4) % 4;
+            ho[k] = low;
+            oo[k] = low <= max_bits;
+        }
+        Py_END_ALLOW_THREADS
+        result = PyBool_FromLong(binary);
+    }
+    PyBuffer_Release(&bits);
+    PyBuffer_Release(&codes);
+    PyBuffer_Release(&out);
+    PyBuffer_Release(&ok);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"read_samples", read_samples, METH_VARARGS,
      "read_samples(samples, ring, K, n, m, border, border_error_rate, min_contrast, min_quiet_zone)\n"
@@ -308,6 +409,10 @@ static PyMethodDef methods[] = {
     {"quad_maps", quad_maps, METH_VARARGS,
      "quad_maps(quads, K, uv, P) -> (mx, my)\n\n"
      "Image points (K x P float32 each) of unit-square points on each quad; see visloc.markers.bits._map_points."},
+    {"match_codes", match_codes, METH_VARARGS,
+     "match_codes(bits, K, codes, max_bits, out, ok) -> bool\n\n"
+     "bits.decode on K x s2 uint8 bits against N x 4 uint64 codes into out (3 x K intp) and ok (K bool); "
+     "False: a bit not 0 or 1."},
     {"sample_means", sample_means, METH_VARARGS,
      "sample_means(raw, K, C, m) -> K x C float64 means of m uint8 samples each; see visloc.markers.bits.sample_cells."},
     {"white_fractions", white_fractions, METH_VARARGS,
@@ -315,7 +420,7 @@ static PyMethodDef methods[] = {
     {NULL, NULL, 0, NULL},
 };
 
-static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_cells", "Stage 9: the maps of the cells' samples, and their read into bits.", -1,
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_cells", "Stages 9-10: the maps of the cells' samples, their read into bits, the dictionary match.", -1,
                                     methods, NULL, NULL, NULL, NULL};
 
 PyMODINIT_FUNC PyInit__cells(void) { return PyModule_Create(&module); }

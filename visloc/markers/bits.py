@@ -523,7 +523,8 @@ def _cell_centres(n: int) -> NDArray[np.float64]:
 
 
 def decode(
-    bits: NDArray[np.uint8], dictionary: Dictionary, *, error_correction_rate: float = 0.6
+    bits: NDArray[np.uint8], dictionary: Dictionary, *, error_correction_rate: float = 0.6,
+    native: bool | None = None,
 ) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp], NDArray[np.bool_]]:
     """Stage 10: match bit grids against ``dictionary`` in four orientations.
 
@@ -537,6 +538,9 @@ def decode(
     error_correction_rate : float
         At most ``int(dictionary.max_correction * error_correction_rate)`` bits are corrected
         (OpenCV's rule).
+    native : bool or None
+        Match with compiled code (``True``: ``visloc.markers._cells``, the same matches) or
+        with numpy (``False``); ``None``: compiled when it was built.
 
     Returns
     -------
@@ -555,8 +559,14 @@ def decode(
     s2 = dictionary.marker_size**2
     if b.ndim == 0 or math.prod(b.shape[1:]) != s2:
         raise ValueError(f"bits must be (K, {dictionary.marker_size}, {dictionary.marker_size}), got {b.shape}")
-    _check_binary(b, "bits")
     k = len(b)
+    max_bits = int(dictionary.max_correction * error_correction_rate)
+    if k and b.dtype in (np.uint8, np.bool_) and use_compiled(native, _cells, "visloc.markers._cells"):
+        out, ok = np.empty((3, k), np.intp), np.empty(k, np.bool_)
+        if _cells.match_codes(np.ascontiguousarray(b).view(np.uint8), k,
+                              np.ascontiguousarray(dictionary.codes, np.uint64), max_bits, out, ok):
+            return out[0], out[1], out[2], ok  # (False: a value other than 0 and 1, raised below)
+    _check_binary(b, "bits")
     b = b.reshape(k, s2).astype(np.uint64)
     weights = np.left_shift(np.uint64(1), np.arange(s2, dtype=np.uint64))
     codes = (b * weights).sum(axis=1, dtype=np.uint64)
@@ -564,7 +574,7 @@ def decode(
     flat = dist.argmin(axis=1)
     ids, r = np.divmod(flat, 4)
     hamming = dist[np.arange(k), flat].astype(np.intp)
-    ok = hamming <= int(dictionary.max_correction * error_correction_rate)
+    ok = hamming <= max_bits
     # observed = rot90(true, r) (counter-clockwise quarter turns): the true top-left cell
     # is then at candidate corner 0, 3, 2, 1 for r = 0, 1, 2, 3.
     return ids.astype(np.intp), ((4 - r) % 4).astype(np.intp), hamming, ok

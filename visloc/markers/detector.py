@@ -861,7 +861,7 @@ class MarkerDetector:
             min_quiet_zone=p.min_quiet_zone, native=p.native)
         valid, bits, margin, contrast, thr = (np.array(a) for a in (valid, bits, margin, contrast, thr))
         reads = [valid, bits, margin, contrast, thr,
-                 *decode(bits, self.dictionary, error_correction_rate=p.error_correction_rate)]  # 10
+                 *decode(bits, self.dictionary, error_correction_rate=p.error_correction_rate, native=p.native)]  # 10
         cells = self._second_reads(gray, quads, corners, refined, cells, reads, retry_fit=retry_fit)
         valid, thr, ids, shift, matched = reads[0], reads[4], reads[5], reads[6], reads[8]
         accept = valid & matched
@@ -925,7 +925,7 @@ class MarkerDetector:
             again = sample_cells(gray, quads[retry], n_cells, per_side=4, native=p.native) if use_fit else _take(cells, retry)
             read = read_bits(again, border_error_rate=p.border_error_rate, border=bb, min_quiet_zone=p.min_quiet_zone,
                              shading=shading)
-            dec = decode(read.bits, self.dictionary, error_correction_rate=p.error_correction_rate)
+            dec = decode(read.bits, self.dictionary, error_correction_rate=p.error_correction_rate, native=p.native)
             pick = read.valid & dec[3]
             won = retry[pick]
             if not len(won):

@@ -539,8 +539,9 @@ def decode(
         At most ``int(dictionary.max_correction * error_correction_rate)`` bits are corrected
         (OpenCV's rule).
     native : bool or None
-        Match with compiled code (``True``: ``visloc.markers._cells``, the same matches) or
-        with numpy (``False``); ``None``: compiled when it was built.
+        Match uint8 or bool bits with compiled code (``True``: ``visloc.markers._cells``, the
+        same matches; other types always with numpy) or with numpy (``False``); ``None``:
+        compiled when it was built.
 
     Returns
     -------
@@ -554,6 +555,8 @@ def decode(
     ValueError
         If ``bits`` does not hold ``s * s`` cells per candidate or holds values other than 0
         and 1.
+    RuntimeError
+        If ``native=True`` and the compiled module was not built.
     """
     b = np.asarray(bits)
     s2 = dictionary.marker_size**2
@@ -561,7 +564,7 @@ def decode(
         raise ValueError(f"bits must be (K, {dictionary.marker_size}, {dictionary.marker_size}), got {b.shape}")
     k = len(b)
     max_bits = int(dictionary.max_correction * error_correction_rate)
-    if k and b.dtype in (np.uint8, np.bool_) and use_compiled(native, _cells, "visloc.markers._cells"):
+    if use_compiled(native, _cells, "visloc.markers._cells") and k and b.dtype in (np.uint8, np.bool_):
         out, ok = np.empty((3, k), np.intp), np.empty(k, np.bool_)
         if _cells.match_codes(np.ascontiguousarray(b).view(np.uint8), k,
                               np.ascontiguousarray(dictionary.codes, np.uint64), max_bits, out, ok):

@@ -309,6 +309,18 @@ static PyObject *white_fractions(PyObject *self, PyObject *args) {
     return out;
 }
 
+/* The number of set bits of v: the compiler's bit counting, else Kernighan's loop. */
+#if defined(__GNUC__) || defined(__clang__)
+#define POPCOUNT64(v) __builtin_popcountll(v)
+#else
+static int popcount_loop(uint64_t v) {
+    int c = 0;
+    for (; v; v &= v - 1) c++;
+    return c;
+}
+#define POPCOUNT64(v) popcount_loop(v)
+#endif
+
 /* The index of the first of the nc codes closest to code, and its distance into *low. The
  * popcnt instruction where the processor has it (checked once at run time; without it the
  * compiler's bit counting is ten times slower), else that bit counting. */
@@ -316,7 +328,7 @@ static PyObject *white_fractions(PyObject *self, PyObject *args) {
     Py_ssize_t best = 0;                              \
     int d0 = 65;                                      \
     for (Py_ssize_t j = 0; j < nc; j++) {             \
-        int d = __builtin_popcountll(code ^ c[j]);    \
+        int d = POPCOUNT64(code ^ c[j]);              \
         if (d < d0) {                                 \
             d0 = d;                                   \
             best = j;                                 \
@@ -331,24 +343,7 @@ __attribute__((target("popcnt"))) static Py_ssize_t closest_popcnt(uint64_t code
 }
 #define HAVE_POPCNT_TARGET 1
 #endif
-#if defined(__GNUC__) || defined(__clang__)
 static Py_ssize_t closest_generic(uint64_t code, const uint64_t *c, Py_ssize_t nc, int *low) { CLOSEST_BODY }
-#else
-static Py_ssize_t closest_generic(uint64_t code, const uint64_t *c, Py_ssize_t nc, int *low) {
-    Py_ssize_t best = 0;
-    int d0 = 65;
-    for (Py_ssize_t j = 0; j < nc; j++) {
-        int d = 0;
-        for (uint64_t v = code ^ c[j]; v; v &= v - 1) d++;
-        if (d < d0) {
-            d0 = d;
-            best = j;
-        }
-    }
-    *low = d0;
-    return best;
-}
-#endif
 
 /* bits.decode: each candidate's s2 bits (0/1, cell i is bit i of its code) against the
  * dictionary's N x 4 codes (id, then rotation); the first closest code wins, as argmin picks

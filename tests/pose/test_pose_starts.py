@@ -65,6 +65,23 @@ def test_matrix_to_euler_at_gimbal_lock_rebuilds_the_matrix() -> None:
             assert rotation_angle(euler_to_matrix(e).T @ R) < 1e-12
 
 
+def test_one_rotation_converts_as_many_do_bit_for_bit() -> None:
+    # euler_to_matrix and matrix_to_euler have a scalar path for one rotation: the same values
+    rng = np.random.default_rng(5)
+    angles = rng.uniform(-4.0, 4.0, (400, 3))
+    angles[:20, 1] = math.pi / 2
+    mats = euler_to_matrix(angles)
+    mats[20:40] = np.round(mats[20:40])  # some exact entries (gimbal lock among them)
+    many = matrix_to_euler(mats)
+    for a, R, e, M in zip(angles, euler_to_matrix(angles), many, mats, strict=True):
+        assert np.array_equal(euler_to_matrix(a), R)
+        assert np.array_equal(euler_to_matrix(np.concatenate([[1.0, 2.0, 3.0], a])), R)  # (6,): the last three
+        assert np.array_equal(matrix_to_euler(M), e)
+    assert matrix_to_euler(mats[0]).shape == (3,)
+    with pytest.raises(IndexError):
+        euler_to_matrix(np.zeros(2))
+
+
 def test_rotation_angle_is_accurate_near_zero_and_pi() -> None:
     for angle in (0.0, 1e-9, 1e-4, 1.0, math.pi - 1e-7, math.pi):
         R = Rotation.from_rotvec(angle * np.array([0.6, 0.0, 0.8])).as_matrix()

@@ -42,6 +42,12 @@ def test_floor_errors(floor):
     below = Pose(LOOKING_DOWN.T, -LOOKING_DOWN.T @ np.array([0.3, -0.3, -0.5]))
     with pytest.raises(ValueError, match="above the floor"):
         floor.render(K, (320, 240), below)
+    above = Pose(LOOKING_DOWN.T, -LOOKING_DOWN.T @ np.array([0.2875, -0.2875, 0.7]))
+    # a float64 K is looked up by its values (checked once): the same view as K given as a list
+    assert np.array_equal(floor.render(K, (320, 240), above), floor.render(K.tolist(), (320, 240), above))
+    for bad in (np.array([[320.0, 0, 159.5], [0, -320.0, 119.5], [0, 0, 1]]), np.eye(2), K * np.nan):
+        with pytest.raises(ValueError, match="K"):
+            floor.render(bad, (320, 240), above)
     c, s = np.cos(0.5), np.sin(0.5)  # a marker on a ramp, not on the floor
     tilted = MarkerMap({0: np.array([[0, 0, 0], [0.1, 0, 0], [0.1, -0.1 * c, 0.1 * s], [0, -0.1 * c, 0.1 * s]])})
     with pytest.raises(ValueError, match="z = 0"):

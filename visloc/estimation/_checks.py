@@ -27,6 +27,8 @@ def as_float_array(value: object, name: str, shape: tuple[int | None, ...]) -> F
         arr = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError) as exc:
         raise TypeError(f"{name} must be an array of numbers, got {type(value).__name__}") from exc
+    if arr.shape == shape:  # the usual call, at once
+        return arr
     if arr.ndim != len(shape) or any(s is not None and s != n for s, n in zip(shape, arr.shape)):
         want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
         raise ValueError(f"{name} must have shape {want}, got {arr.shape}")

@@ -458,7 +458,7 @@ class PositionVelocityKF:
                 raise ValueError(f"std must be > 0, got {s.tolist()}")
             return np.diag(s**2)
         cov = as_float_array(R, "R", (self.dims, self.dims))
-        if not np.all(np.isfinite(cov)):
+        if not all_finite(cov):
             return None
         # np.allclose(cov, cov.T, rtol=1e-9, atol=1e-12 max|cov|) without its overhead (finite here)
         mag = np.abs(cov)
@@ -478,7 +478,7 @@ class PositionVelocityKF:
         cov = self._measurement_cov(R, std, kind)
         if t is not None:
             self.predict(t)
-        if cov is None or not np.all(np.isfinite(zz)):
+        if cov is None or not all_finite(zz):
             self.skipped[kind] += 1
             return False
         H = self._H[kind]

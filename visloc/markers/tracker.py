@@ -188,10 +188,13 @@ class MarkerTracker:
         by the affine motion that took the others' corners through their last step (least
         squares; fewer than two others: it stays)."""
         now = np.array([last[k] for k in keys])
-        seen = np.array([k in self._before for k in keys])
-        if not seen.any():
+        seen_list = [k in self._before for k in keys]
+        if not any(seen_list):
             return now
-        before = np.array([self._before[k] for k, s in zip(keys, seen, strict=True) if s])
+        before = np.array([self._before[k] for k, s in zip(keys, seen_list, strict=True) if s])
+        if all(seen_list):  # (the usual frame: every marker was seen twice)
+            return 2.0 * now - before
+        seen = np.array(seen_list)
         pred = now.copy()
         pred[seen] = 2.0 * now[seen] - before
         if not seen.all() and seen.sum() >= 2:

@@ -174,14 +174,20 @@ def estimate_camera_pose(
         raise TypeError(f"start must be a Pose, got {type(start).__name__}")
     for name, v, integer in (("pixel_sigma", pixel_sigma, False), ("max_residual", max_residual, False),
                              ("max_iter", max_iter, True), ("n_starts", n_starts, True)):
-        if v is None and name == "pixel_sigma":
-            continue
+        if (v is None and name == "pixel_sigma") or (type(v) in (int, float) and 0 < v < math.inf
+                                                      and (not integer or int(v) == v)):
+            continue  # (the usual values, at once)
         if (isinstance(v, bool) or not isinstance(v, (int, float, np.number)) or not np.isfinite(v) or v <= 0
                 or (integer and int(v) != v)):
             kind = "a whole number" if integer else "a finite number"
             raise ValueError(f"estimate_camera_pose: {name} must be {kind} > 0, got {v!r}")
-    known = [d for d in detections if d.id in marker_map]
-    unknown = sorted({int(d.id) for d in detections if d.id not in marker_map})
+    known, missing = [], set()
+    for d in detections:  # one pass over the detections (id in the map, as MarkerMap.__contains__)
+        if d.id in marker_map.corners:
+            known.append(d)
+        else:
+            missing.add(int(d.id))
+    unknown = sorted(missing)
     ids = [int(d.id) for d in known]
     repeated: list[int] = []
     if len(set(ids)) < len(ids):  # which copy is the marker is unknown: none is used
@@ -272,15 +278,16 @@ def _joint_fit(params: FloatArray, obj: FloatArray, xy: FloatArray, f: FloatArra
     rejected: list[int] = []
     params = params[None]
     while True:
-        X = obj[keep].reshape(-1, 3)
-        p, sse, M = levenberg_marquardt(params, X.T, xy[keep].reshape(-1, 2).T, f, max_iter=max_iter)
-        pick = int(np.argmin(sse))
-        best = p[pick]
+        X, x = (obj, xy) if not rejected else (obj[keep], xy[keep])  # (all kept: no copies)
+        p, _, M = levenberg_marquardt(params, X.reshape(-1, 3).T, x.reshape(-1, 2).T, f, max_iter=max_iter)
+        best = p[0]  # (one start)
         res = _marker_rms(best, obj, xy, f)
-        limit = max(max_residual, 3.0 * median(res[keep].tolist()))  # a few values: no numpy
-        worst = int(np.argmax(np.where(keep, res, -1.0)))
-        if keep.sum() <= 1 or res[worst] <= limit:
-            return best, keep, rejected, res, M[pick]
+        r, k = res.tolist(), keep.tolist()  # a few values: no numpy
+        limit = max(max_residual, 3.0 * median([v for v, kk in zip(r, k, strict=True) if kk]))
+        scores = [v if kk else -1.0 for v, kk in zip(r, k, strict=True)]
+        worst = scores.index(max(scores))  # the first largest, as np.argmax
+        if len(ids) - len(rejected) <= 1 or scores[worst] <= limit:
+            return best, keep, rejected, res, M[0]
         keep[worst] = False
         rejected.append(ids[worst])
         params = best[None]
@@ -306,7 +313,7 @@ def _covariance(M: FloatArray, n_residuals: int, pixel_sigma: float | None) -> F
     except np.linalg.LinAlgError:
         return None
     cov = var * 0.5 * (inv + inv.T)
-    return cov if np.isfinite(cov).all() and (np.diag(cov) > 0).all() else None
+    return cov if all_finite(cov) and min(np.diag(cov).tolist()) > 0 else None
 
 
 def markers_in_view(marker_map: MarkerMap, camera: Camera, pose: Pose, *, size: tuple[int, int] | None = None,
@@ -374,7 +381,8 @@ def markers_in_view(marker_map: MarkerMap, camera: Camera, pose: Pose, *, size: 
         front = np.repeat(near, 4)
         if near.any():
             px[front] = camera.project(pc[front])
-    inside = (front & (px >= margin).all(axis=1) & (px <= np.array([w - 1.0, h - 1.0]) - margin).all(axis=1))
+    x, y = px[:, 0], px[:, 1]
+    inside = front & (x >= margin) & (y >= margin) & (x <= (w - 1.0) - margin) & (y <= (h - 1.0) - margin)
     whole = inside.reshape(-1, 4).all(axis=1)
     quads = px.reshape(-1, 4, 2)
     return {i: quads[k] for k, i in zip(np.flatnonzero(whole).tolist(), ids[whole].tolist(), strict=True)}

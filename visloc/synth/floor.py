@@ -16,6 +16,7 @@ above), as :func:`visloc.pose.GridMap` builds them.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -130,7 +131,7 @@ class FloorTexture:
         ValueError
             If part of the view misses the floor, or the camera is not above it.
         """
-        K = check_camera(K)
+        K, k_inv = _camera(K)
         w, h = check_size(size)
         if not isinstance(T_cam_map, Pose):
             raise TypeError(f"T_cam_map: expected a Pose, got {type(T_cam_map).__name__}")
@@ -141,7 +142,7 @@ class FloorTexture:
             raise ValueError(f"T_cam_map: the camera centre must be above the floor, got z = {C[2]:.4g} m")
         centre = C.copy()
         centre[:2] -= self.origin  # texel (0, 0) at the ground renderer's origin
-        img = _warped(self.levels, K, (w, h), R_map_cam, centre, self.metres_per_texel, s)
+        img = _warped(self.levels, K, (w, h), R_map_cam, centre, self.metres_per_texel, s, k_inv=k_inv)
         if img is None:  # the view leaves the printed floor's texture: its mirror tiling
             img = _render(self.levels, K, (w, h), R_map_cam, centre, self.metres_per_texel, s)
         noise = check_number(noise_sigma, "noise_sigma", low=0.0)
@@ -152,8 +153,26 @@ class FloorTexture:
                        noise_sigma=noise, fast_noise=bool(fast_noise))[0]
 
 
+def _camera(K: object) -> tuple[FloatArray, FloatArray]:
+    """``K`` checked (:func:`~visloc.synth._checks.check_camera`) and its inverse; a float64
+    (3, 3) array is looked up by its values (a video's frames share one camera)."""
+    if isinstance(K, np.ndarray) and K.dtype == np.float64 and K.shape == (3, 3):
+        return _camera_of(K.tobytes())
+    K = check_camera(K)
+    return K, np.linalg.inv(K)
+
+
+@lru_cache(maxsize=16)
+def _camera_of(values: bytes) -> tuple[FloatArray, FloatArray]:
+    K = check_camera(np.frombuffer(values, np.float64).reshape(3, 3))
+    k_inv = np.linalg.inv(K)
+    K.setflags(write=False)
+    k_inv.setflags(write=False)
+    return K, k_inv
+
+
 def _warped(levels: tuple[NDArray, ...], K: FloatArray, size: tuple[int, int], R: FloatArray,
-            C: FloatArray, mpt: float, s: int) -> NDArray | None:
+            C: FloatArray, mpt: float, s: int, *, k_inv: FloatArray | None = None) -> NDArray | None:
     """The view of :func:`visloc.synth.flight._render` by one ``cv2.warpPerspective`` of the
     texture level: the floor plane maps to the image by a homography, so the texture is
     warped (bilinear, ``s`` x ``s`` samples per pixel averaged) instead of sampled through
@@ -161,7 +180,7 @@ def _warped(levels: tuple[NDArray, ...], K: FloatArray, size: tuple[int, int], R
     the levels' type (uint8 for a :class:`FloorTexture`: rounded at each sample and mean). None
     when the view reaches beyond the texture, whose mirror tiling ``_render`` keeps."""
     w, h = size
-    k_inv = np.linalg.inv(K)
+    k_inv = np.linalg.inv(K) if k_inv is None else k_inv  # (K's inverse)
     tex, scale = _texture_level(levels, K, size, R, C, mpt, k_inv)
     k = -C[2] / (mpt * scale)  # ray length to the ground per unit ray z, in texels
     off = C[:2] / (mpt * scale) + 0.5 / scale - 0.5  # the camera's texel, in the level's coordinates

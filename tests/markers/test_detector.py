@@ -466,3 +466,20 @@ def test_coarse_refinement_settings_are_checked():
         MarkerDetector("DICT_4X4_50", coarse_scale=0.5)
     with pytest.raises(ValueError, match="coarse_iterations"):
         MarkerDetector("DICT_4X4_50", coarse_iterations=0)
+
+
+def test_the_detectors_fast_detection_is_the_dataclasss_own() -> None:
+    # the detector sets a MarkerDetection's fields at once (_detection): the same object as the
+    # dataclass's __init__ makes, every field included (a new field must be added there too)
+    import dataclasses
+
+    from visloc.markers.detector import _detection
+    from visloc.types import MarkerDetection
+
+    corners = np.arange(8.0).reshape(4, 2)
+    values = (7, corners, 1, 0.25, 3, 80.5, False, 0.75, True)
+    fast, slow = _detection(*values), MarkerDetection(*values)
+    assert type(fast) is MarkerDetection and vars(fast) == vars(slow)
+    assert [f.name for f in dataclasses.fields(MarkerDetection)] == list(vars(fast))
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        fast.id = 2  # type: ignore[misc]

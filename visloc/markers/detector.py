@@ -798,7 +798,8 @@ class MarkerDetector:
             return []
         quads = np.array(cands.quads)
         coarse = None if self.params.coarse_scale is None else np.array(cands.scales) >= self.params.coarse_scale
-        cells, reads, made, areas = self._made(gray, quads, inverted, coarse=coarse)
+        cells, reads, made, corners = self._made(gray, quads, inverted, coarse=coarse)
+        areas = np.abs(_areas(corners)).tolist()
         valid, bits = reads[:2]
         found: list[tuple[MarkerDetection, float]] = []
         for i, det in enumerate(made):
@@ -820,11 +821,12 @@ class MarkerDetector:
 
     def _made(self, gray: NDArray[np.uint8], quads: NDArray, inverted: bool, *, retry_fit: bool = True,
               coarse: NDArray | None = None
-              ) -> tuple[CellSample, list[NDArray], list[MarkerDetection | None], list[float]]:
+              ) -> tuple[CellSample, list[NDArray], list[MarkerDetection | None], NDArray]:
         """Stages 8-10 (:meth:`_read`) on candidate quads (K, 4, 2), and what they make:
-        ``(cells, reads, detections, areas)``, a :class:`MarkerDetection` per accepted
+        ``(cells, reads, detections, corners)``, a :class:`MarkerDetection` per accepted
         candidate (corners from the marker's own top-left corner) and None per rejected one,
-        with each quad's area, px^2. ``retry_fit``, ``coarse``: as :meth:`_read`."""
+        with every candidate's corners in that order (K, 4, 2). ``retry_fit``, ``coarse``: as
+        :meth:`_read`."""
         corners, refined, cells, reads, accept, confidence = self._read(gray, quads, inverted, retry_fit=retry_fit,
                                                                         coarse=coarse)
         ids, shift, hamming = reads[5:8]
@@ -832,9 +834,9 @@ class MarkerDetector:
         rolled = corners[np.arange(len(corners))[:, None], order]
         rows = zip(accept.tolist(), ids.tolist(), list(rolled), hamming.tolist(), reads[2].tolist(), shift.tolist(),
                    reads[3].tolist(), refined.tolist(), confidence.tolist(), strict=True)  # Python ints, floats, bools
-        made = [MarkerDetection(mid, c, ham, mar, rot, con, ref, conf, inverted) if ok else None
+        made = [_detection(mid, c, ham, mar, rot, con, ref, conf, inverted) if ok else None
                 for ok, mid, c, ham, mar, rot, con, ref, conf in rows]
-        return cells, reads, made, np.abs(_areas(rolled)).tolist()
+        return cells, reads, made, rolled
 
     def _read(self, gray: NDArray[np.uint8], quads: NDArray, inverted: bool, *, retry_fit: bool = True,
               coarse: NDArray | None = None) -> tuple:
@@ -1007,6 +1009,20 @@ def _as_pass(p: object) -> SearchPass:
 def _note(log: dict | None, contour, scale, split, quad, cells, bits, det, stage: str) -> None:
     if log is not None:
         log["candidates"].append(CandidateTrace(contour, scale, split, quad, cells, bits, det, stage))
+
+
+_NEW = object.__new__
+
+
+def _detection(mid: int, corners: NDArray, hamming: int, margin: float, rotation: int, contrast: float,
+               refined: bool, confidence: float, inverted: bool) -> MarkerDetection:
+    """``MarkerDetection(mid, corners, ...)`` with its fields set at once (a frozen
+    dataclass's ``__init__`` sets each through ``object.__setattr__``: twice the time, for
+    the many detections of a tracked video)."""
+    d = _NEW(MarkerDetection)
+    d.__dict__.update(id=mid, corners=corners, hamming=hamming, margin=margin, rotation=rotation, contrast=contrast,
+                      refined=refined, confidence=confidence, inverted=inverted)
+    return d
 
 
 def _take(cells: CellSample, rows: NDArray) -> CellSample:

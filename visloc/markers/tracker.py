@@ -25,7 +25,6 @@ full detection is no longer needed (``visloc localize`` and the simulation's vis
 from __future__ import annotations
 
 import numbers
-import operator
 from collections.abc import Mapping
 
 import numpy as np
@@ -37,8 +36,6 @@ from visloc.markers.detector import MarkerDetector
 from visloc.types import MarkerDetection
 
 __all__ = ["MarkerTracker"]
-
-_by_id = operator.attrgetter("id")
 
 
 class MarkerTracker:
@@ -183,8 +180,6 @@ class MarkerTracker:
                     dets.append(d)
         if not dets or confirmed < self.keep * tried:
             return None
-        if len({d.id for d in dets}) == len(dets):  # ids apart (the usual frame): by id alone, the same order
-            return sorted(dets, key=_by_id)
         return sorted(dets, key=lambda d: (d.id, d.corners[0, 1], d.corners[0, 0]))
 
     def _predicted(self, keys: list[tuple[int, bool]], last: dict[tuple[int, bool], NDArray]) -> NDArray:

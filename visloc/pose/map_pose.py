@@ -182,8 +182,8 @@ def estimate_camera_pose(
             kind = "a whole number" if integer else "a finite number"
             raise ValueError(f"estimate_camera_pose: {name} must be {kind} > 0, got {v!r}")
     known, missing = [], set()
-    for d in detections:  # one pass over the detections (id in the map, as MarkerMap.__contains__)
-        if d.id in marker_map.corners:
+    for d in detections:  # one pass over the detections
+        if d.id in marker_map:
             known.append(d)
         else:
             missing.add(int(d.id))

@@ -13,6 +13,8 @@ from numpy.typing import ArrayLike
 
 from visloc.types import FloatArray
 
+Angle = float | FloatArray  # a cosine or sine: one value, or one per rotation
+
 
 def euler_to_matrix(angles: ArrayLike) -> FloatArray:
     """Rotation matrices of Z-Y-X Euler angles.
@@ -31,27 +33,20 @@ def euler_to_matrix(angles: ArrayLike) -> FloatArray:
     a = np.asarray(angles, dtype=np.float64)[..., -3:]
     c = np.cos(a)
     s = np.sin(a)
-    if a.shape == (3,):  # one rotation: the same products on Python floats (the same values), in a fifth of the time
-        (cph, cth, cps), (sph, sth, sps) = c.tolist(), s.tolist()
-        # fmt: off
-        return np.array([[cps * cth, cps * sth * sph - sps * cph, cps * sth * cph + sps * sph],
-                         [sps * cth, sps * sth * sph + cps * cph, sps * sth * cph - cps * sph],
-                         [-sth, cth * sph, cth * cph]])
-        # fmt: on
-    cph, cth, cps = c[..., 0], c[..., 1], c[..., 2]
-    sph, sth, sps = s[..., 0], s[..., 1], s[..., 2]
-    # report §2: R(lambda) = Rz(psi) Ry(theta) Rx(phi), multiplied out
-    # fmt: off
-    R = np.stack(
-        [
-            cps * cth, cps * sth * sph - sps * cph, cps * sth * cph + sps * sph,
-            sps * cth, sps * sth * sph + cps * cph, sps * sth * cph - cps * sph,
-            -sth, cth * sph, cth * cph,
-        ],
-        axis=-1,
-    )
-    # fmt: on
+    if a.shape == (3,):  # one rotation: the products on Python floats (the same values), in a fifth of the time
+        return np.array(_zyx_entries(*c.tolist(), *s.tolist())).reshape(3, 3)
+    R = np.stack(_zyx_entries(c[..., 0], c[..., 1], c[..., 2], s[..., 0], s[..., 1], s[..., 2]), axis=-1)
     return R.reshape(a.shape[:-1] + (3, 3))
+
+
+def _zyx_entries(cph: Angle, cth: Angle, cps: Angle, sph: Angle, sth: Angle, sps: Angle) -> list[Angle]:
+    """The nine entries of ``Rz(psi) Ry(theta) Rx(phi)``, row by row, from the angles' cosines
+    and sines, floats or arrays alike (report §2: R(lambda), multiplied out)."""
+    # fmt: off
+    return [cps * cth, cps * sth * sph - sps * cph, cps * sth * cph + sps * sph,
+            sps * cth, sps * sth * sph + cps * cph, sps * sth * cph - cps * sph,
+            -sth, cth * sph, cth * cph]
+    # fmt: on
 
 
 def matrix_to_euler(R: ArrayLike) -> FloatArray:
@@ -71,12 +66,8 @@ def matrix_to_euler(R: ArrayLike) -> FloatArray:
         ``phi`` is 0, as scipy chooses.
     """
     R = np.asarray(R, dtype=np.float64)
-    if R.shape == (3, 3):  # one matrix: numpy's functions on its scalars (the same values), in a fifth of the time
-        (r00, r01, _), (r10, r11, _), (r20, r21, r22) = R.tolist()
-        theta = np.arcsin(min(max(-r20, -1.0), 1.0))
-        if r00 == 0.0 and r10 == 0.0:
-            return np.array([0.0, theta, np.arctan2(-r01, r11)])
-        return np.array([np.arctan2(r21, r22), theta, np.arctan2(r10, r00)])
+    if R.shape == (3, 3):  # one matrix: the scalar code (the same values), in a fifth of the time
+        return np.array(matrix_to_euler_list(R[None])[0])
     theta = np.arcsin(np.clip(-R[..., 2, 0], -1.0, 1.0))
     phi = np.arctan2(R[..., 2, 1], R[..., 2, 2])
     psi = np.arctan2(R[..., 1, 0], R[..., 0, 0])
@@ -101,12 +92,13 @@ def matrix_to_euler_list(R: FloatArray) -> list[list[float]]:
         ``[phi, theta, psi]`` of each matrix, rad, on :func:`matrix_to_euler`'s branch.
     """
     out = []
+    # numpy's arcsin and arctan2 on each value: the batched version's functions, so its values
     for (r00, r01, _), (r10, r11, _), (r20, r21, r22) in np.asarray(R, dtype=np.float64).tolist():
-        theta = math.asin(min(max(-r20, -1.0), 1.0))
+        theta = float(np.arcsin(min(max(-r20, -1.0), 1.0)))
         if r00 == 0.0 and r10 == 0.0:  # cos(theta) exactly 0: as matrix_to_euler
-            out.append([0.0, theta, math.atan2(-r01, r11)])
+            out.append([0.0, theta, float(np.arctan2(-r01, r11))])
         else:
-            out.append([math.atan2(r21, r22), theta, math.atan2(r10, r00)])
+            out.append([float(np.arctan2(r21, r22)), theta, float(np.arctan2(r10, r00))])
     return out
 
 

@@ -164,6 +164,7 @@ def _camera(K: object) -> tuple[FloatArray, FloatArray]:
 
 @lru_cache(maxsize=16)
 def _camera_of(values: bytes) -> tuple[FloatArray, FloatArray]:
+    """:func:`_camera` of a K given by its float64 bytes (both read-only: they are shared)."""
     K = check_camera(np.frombuffer(values, np.float64).reshape(3, 3))
     k_inv = np.linalg.inv(K)
     K.setflags(write=False)

@@ -26,6 +26,10 @@ import visloc.pose.gauss_newton as G
 
 C._borders, C._filter, Q._quads, R._refine = load("_borders"), load("_filter"), load("_quads"), load("_refine")
 B._cells, G._lm, D._direct, T._threshold = load("_cells"), load("_lm"), load("_direct"), load("_threshold")
+import visloc.control.controller as K
+import visloc.model.rigid_body as RB
+
+RB._rigid, K._feedback = load("_rigid"), load("_feedback")
 
 from visloc.flow import block_flow, global_motion
 from visloc.markers import MarkerDetector
@@ -70,4 +74,27 @@ for motion in (GlobalMotion(np.array([1e4, -1e4]), 0.0, 1.0, None, 0.0, 10, "sim
         D.refine_motion(a, np.roll(a, 3, axis=1), motion, stride=stride, prior=motion)
 f = block_flow(a, np.roll(a, 2, axis=0))
 global_motion(f)
+inertia = [0.0022, 0.0029, 0.0048]
+for _ in range(50):  # the rigid body and the controller on wild, non-finite and wrongly sized values
+    s = (rng.normal(0, 1e3, 12) * rng.choice([1.0, np.inf, np.nan], 12, p=[0.8, 0.1, 0.1])).tolist()
+    RB.rk4_values(s, rng.normal(0, 10, 4).tolist(), 0.01, 0.42, 9.81, inertia, gyroscopic=bool(_ % 2),
+                  force=None if _ % 3 else rng.normal(size=3).tolist(), native=True)
+    RB.rhs_values(s, [1.0, 0.0, 0.0, 0.0], 0.42, 9.81, inertia, native=True)
+    ctrl = K.Controller(native=True)
+    ctrl.pwm(np.r_[rng.normal(0, 10, 12)], np.zeros(4), 0.005)
+for bad in ([0.0] * 11, [0.0] * 13, "abcdefghijkl"):
+    try:
+        RB.rk4_values(bad, [1.0, 0, 0, 0], 0.01, 0.42, 9.81, inertia, native=True)
+    except (ValueError, TypeError):
+        pass
+    try:
+        K._feedback.feedback(bad, [0.0] * 4, 0.005, b"\0" * 512, b"\0" * 160, [1.0, 1.0], 1.0, [0.0] * 4,
+                             [1.0] * 4, [1.0] * 4)
+    except (ValueError, TypeError):
+        pass
+try:
+    K._feedback.feedback([0.0] * 12, [0.0] * 4, 0.005, b"\0" * 8, b"\0" * 160, [1.0, 1.0], 1.0, [0.0] * 4,
+                         [1.0] * 4, [1.0] * 4)
+except ValueError:
+    pass
 print("fuzz ok")

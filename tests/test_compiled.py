@@ -28,17 +28,21 @@ def _compiler() -> str | None:
 def test_every_stage_was_compiled_where_a_compiler_is():
     """With a compiler at install the C code must have been built: a broken build would
     otherwise fall back silently and only the bench would notice."""
+    from visloc.control import controller
     from visloc.flow import direct
     from visloc.markers import binarize, bits, contours, corners_batch, refine
+    from visloc.model import rigid_body
     from visloc.pose import gauss_newton
 
     assert binarize._threshold is not None and contours.NATIVE_BORDERS and corners_batch.NATIVE_QUADS and refine.NATIVE_REFINE
     assert bits.NATIVE_CELLS and gauss_newton.NATIVE_LM and direct.NATIVE_DIRECT
+    assert rigid_body._rigid is not None and controller._feedback is not None
 
 
 SOURCES = {"_threshold": "visloc/markers/_threshold.c", "_borders": "visloc/markers/_borders.c", "_filter": "visloc/markers/_filter.c",
            "_quads": "visloc/markers/_quads.c", "_refine": "visloc/markers/_refine.c",
-           "_cells": "visloc/markers/_cells.c", "_lm": "visloc/pose/_lm.c", "_direct": "visloc/flow/_direct.c"}
+           "_cells": "visloc/markers/_cells.c", "_lm": "visloc/pose/_lm.c", "_direct": "visloc/flow/_direct.c",
+           "_rigid": "visloc/model/_rigid.c", "_feedback": "visloc/control/_feedback.c"}
 
 
 def _asan_runtime() -> str | None:

@@ -1,5 +1,7 @@
 """Rigid-body equations (report eqs. 2.1-2.8 / A.1-A.16), NED, Z-Y-X Euler angles."""
 
+import math
+
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
@@ -216,3 +218,41 @@ def test_float_helpers_agree_with_the_array_forms():
                                    euler_rate_matrix(lam) @ omega, rtol=1e-12, atol=1e-12)
         pwm = rng.uniform(-20.0, 100.0, 4)
         np.testing.assert_allclose(pwm_bar_values(pwm.tolist(), 25.19), pwm_bar(pwm, 25.19), rtol=0, atol=0)
+
+
+@pytest.mark.parametrize("gyroscopic", [False, True])
+def test_the_compiled_derivative_and_rk4_step_are_the_python_ones(gyroscopic):
+    """visloc.model._rigid gives the Python version's floats bit for bit: the derivative and
+    one RK4 step, with and without an external force, over random states and inputs."""
+    from visloc.model.rigid_body import rhs_values, rk4_values
+
+    rng = np.random.default_rng(5)
+    inertia = [ARDRONE2.Ixx, ARDRONE2.Iyy, ARDRONE2.Izz]
+    for i in range(300):
+        s = np.r_[rng.normal(0, 2, 6), rng.uniform(-1.5, 1.5, 3), rng.normal(0, 3, 3)].tolist()
+        u = np.r_[rng.uniform(0, 10), rng.normal(0, 0.1, 3)].tolist()
+        force = None if i % 2 else rng.normal(0, 0.5, 3).tolist()
+        h = float(rng.uniform(1e-4, 0.02))
+        kw = {"gyroscopic": gyroscopic, "force": force}
+        assert rhs_values(s, u, ARDRONE2.mass, ARDRONE2.g, inertia, native=True, **kw) == \
+            rhs_values(s, u, ARDRONE2.mass, ARDRONE2.g, inertia, native=False, **kw)
+        assert rk4_values(s, u, h, ARDRONE2.mass, ARDRONE2.g, inertia, native=True, **kw) == \
+            rk4_values(s, u, h, ARDRONE2.mass, ARDRONE2.g, inertia, native=False, **kw)
+
+
+def test_the_compiled_step_on_bad_values():
+    """A state gone bad gives non-finite floats compiled (the Python version raises inside
+    math, the vehicle reports either as a divergence); wrong sizes raise."""
+    from visloc.model.rigid_body import rk4_values
+
+    inertia = [ARDRONE2.Ixx, ARDRONE2.Iyy, ARDRONE2.Izz]
+    s = [0.0] * 12
+    s[6] = math.inf
+    out = rk4_values(s, [1.0, 0, 0, 0], 0.01, ARDRONE2.mass, ARDRONE2.g, inertia, native=True)
+    assert not all(map(math.isfinite, out))
+    with pytest.raises(ValueError, match="s: expected 12"):
+        rk4_values([0.0] * 11, [1.0, 0, 0, 0], 0.01, ARDRONE2.mass, ARDRONE2.g, inertia, native=True)
+    with pytest.raises(ValueError, match="force: expected 3"):
+        rk4_values([0.0] * 12, [1.0, 0, 0, 0], 0.01, ARDRONE2.mass, ARDRONE2.g, inertia, force=[1.0], native=True)
+    with pytest.raises(TypeError):
+        rk4_values([0.0] * 12, ["a", 0, 0, 0], 0.01, ARDRONE2.mass, ARDRONE2.g, inertia, native=True)

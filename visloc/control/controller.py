@@ -14,12 +14,18 @@ import operator
 import numpy as np
 from numpy.typing import ArrayLike
 
+from visloc._compiled import use_compiled
 from visloc.control._checks import as_array, check_params, check_real, resolve_arm
 from visloc.control.design import ControllerGains, ControlSpecs, design_gains
 from visloc.control.linear import _pilot_values, hover_input
 from visloc.model.params import ARDRONE2, ARDrone2Params
 from visloc.model.propulsion import PwmResult, mixer_matrix, pwm_from_bar
 from visloc.types import FloatArray
+
+try:  # the compiled feedback law (optional: without a compiler the Python one runs)
+    from visloc.control import _feedback
+except ImportError:  # pragma: no cover - built with the package
+    _feedback = None
 
 _POSITION_COLUMNS = np.r_[0:6, 12:16]  # x_P..w_P and the integrals: the "set-point" part
 _POSITION_INDEX = _POSITION_COLUMNS.tolist()
@@ -85,6 +91,9 @@ class Controller:
         An axis stops integrating while its error is beyond ``integral_zone`` (m, rad) *and*
         it moves faster than ``integral_rate_zone`` (m/s, rad/s): position then heading.
         Defaults (0.3 m, 0.3 rad) and (0.1 m/s, 0.1 rad/s).
+    native : bool, optional
+        The feedback law of each step compiled (``visloc.control._feedback``, the same floats):
+        None when it was built, True always (``RuntimeError`` when not built), False never.
 
     Notes
     -----
@@ -110,8 +119,13 @@ class Controller:
         max_thrust_change: float | None = None,
         integral_zone: tuple[float, float] = (0.3, 0.3),
         integral_rate_zone: tuple[float, float] = (0.1, 0.1),
+        native: bool | None = None,
     ) -> None:
         self.params = check_params(params)
+        if native is not None and not isinstance(native, bool):
+            raise TypeError(f"native: expected None or a bool, got {type(native).__name__}")
+        use_compiled(native, _feedback, "visloc.control._feedback")  # True without the build: RuntimeError now
+        self.native = native
         if gains is not None and not isinstance(gains, ControllerGains):
             raise TypeError(f"gains: expected ControllerGains, got {type(gains).__name__}")
         self.gains = design_gains(self.params, specs=specs) if gains is None else gains
@@ -126,6 +140,8 @@ class Controller:
         self._K_rows = self._K.tolist()
         # the set-point part's columns (§4.4), of the rows of tau_x and tau_y (the bounded ones)
         self._K_setpoint_rows = self._K[1:3, _POSITION_COLUMNS].tolist()
+        self._K_bytes = self._K.astype(np.float64).tobytes()  # the same, for the compiled law
+        self._K_setpoint_bytes = np.ascontiguousarray(self._K[1:3, _POSITION_COLUMNS], np.float64).tobytes()
         self._gamma_inv_rows = self._gamma_inv.tolist()
         tilt = check_real(max_tilt, "max_tilt", positive=True, allow_inf=True)
         self.torque_bound = np.array([self.gains.roll.kp, self.gains.pitch.kp]) * tilt
@@ -242,17 +258,29 @@ class Controller:
         s = as_array(state, "state", (12,)).tolist()
         x = _error_values(s, as_array(setpoint, "setpoint", (4,)).tolist())
         thrust_ff = 0.0 if reference is None else self._feed_forward(x, s[8], reference)
+        u, integral = self._feedback_values(x, step)
+        self._integral = np.array(integral)
+        u[0] += thrust_ff
+        return u
+
+    def _feedback_values(self, x: list[float], step: float) -> tuple[list[float], list[float]]:
+        """``u0 - K [x; integral]`` (4 floats) for the error state ``x`` (12 floats) after the
+        integrators advance by ``step`` s, and the new integrals (4 floats). Compiled
+        (``visloc.control._feedback``) unless ``native`` was False or it was not built: the
+        same operations in the same order."""
         integral = self._integral.tolist()
+        zone, rate_zone = self.integral_zone.tolist(), self.integral_rate_zone.tolist()
+        if use_compiled(self.native, _feedback, "visloc.control._feedback"):
+            return _feedback.feedback(x, integral, step, self._K_bytes, self._K_setpoint_bytes,
+                                      self.torque_bound.tolist(), self.max_thrust_change, self.u0.tolist(), zone,
+                                      rate_zone)
         _, clipped = self._inputs(x, integral)
         e, rate = (x[0], x[1], x[2], x[8]), (x[3], x[4], x[5], x[11])
-        zone, rate_zone = self.integral_zone.tolist(), self.integral_rate_zone.tolist()
         # §4.2.3: integrate unless that axis's command is clipped or it moves outside its zone
         integral = [i if c or (abs(a) > z and abs(b) > w) else i + a * step for i, c, a, b, z, w
                     in zip(integral, clipped, e, rate, zone, rate_zone, strict=True)]
-        self._integral = np.array(integral)
         u, _ = self._inputs(x, integral)
-        u[0] += thrust_ff
-        return u
+        return u, integral
 
     def pwm(self, state: ArrayLike, setpoint: ArrayLike, dt: float, *,
             reference: tuple[ArrayLike, ArrayLike] | None = None) -> PwmResult:

@@ -338,6 +338,8 @@ def pwm_from_bar(bar: FloatArray, k: float, *, pwm_max: float = 100.0) -> PwmRes
     """
     values = bar.tolist()
     raw = [math.sqrt(max(v, 0.0)) - k for v in values]  # report eq. (4.6); a negative Gamma^-1 u gives -k
+    if min(values) >= 0.0 and min(raw) >= 0.0 and max(raw) <= pwm_max:  # nothing clipped (the usual step)
+        return PwmResult(pwm=np.array(raw), saturated=False, reason="", pwm_bar=bar)
     pwm = np.array([min(max(r, 0.0), pwm_max) for r in raw])
     reasons = []
     for i in range(4):

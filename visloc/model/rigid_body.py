@@ -24,8 +24,14 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from visloc._checks import all_finite
+from visloc._compiled import use_compiled
 from visloc.model.params import ARDrone2Params, check_params
 from visloc.types import FloatArray
+
+try:  # the compiled derivative and RK4 step (optional: without a compiler the Python ones run)
+    from visloc.model import _rigid
+except ImportError:  # pragma: no cover - built with the package
+    _rigid = None
 
 STATE_NAMES: tuple[str, ...] = (
     "x", "y", "z", "u", "v", "w", "phi", "theta", "psi", "p", "q", "r",
@@ -233,9 +239,10 @@ def rhs(state: FloatArray, u: FloatArray, mass: float, g: float, inertia: FloatA
 
 
 def rhs_values(s: list[float], u: list[float], mass: float, g: float, inertia: list[float], *,
-               gyroscopic: bool = False) -> list[float]:
-    """:func:`rhs` on Python floats (the one implementation of the model's equations; no
-    array is made, so an integrator on lists runs several times faster).
+               gyroscopic: bool = False, force: list[float] | None = None, native: bool | None = None) -> list[float]:
+    """:func:`rhs` on Python floats (the model's equations; no array is made, so an integrator
+    on lists runs several times faster). Compiled (``visloc.model._rigid``) when it was built:
+    the same operations in the same order, the same floats.
 
     Parameters
     ----------
@@ -249,12 +256,19 @@ def rhs_values(s: list[float], u: list[float], mass: float, g: float, inertia: l
         ``[Ixx, Iyy, Izz]``, kg m^2.
     gyroscopic : bool
         Include ``-omega x J omega`` (see :func:`derivatives`).
+    force : list of 3 floats, optional
+        External force on the CoG, N, in A: ``force / mass`` joins the acceleration.
+    native : bool, optional
+        None: the compiled version when it was built; True: it (RuntimeError when not
+        built); False: the Python one.
 
     Returns
     -------
     list of 12 floats
         ``d state / dt``.
     """
+    if use_compiled(native, _rigid, "visloc.model._rigid"):
+        return _rigid.rhs(s, u, force, mass, g, inertia[0], inertia[1], inertia[2], gyroscopic)
     phi, theta, psi, p, q, r = s[6], s[7], s[8], s[9], s[10], s[11]
     cf, sf = math.cos(phi), math.sin(phi)
     ct, st = math.cos(theta), math.sin(theta)
@@ -264,7 +278,7 @@ def rhs_values(s: list[float], u: list[float], mass: float, g: float, inertia: l
     if gyroscopic:  # Euler's equation (see derivatives): moment - omega x (J omega)
         jx, jy, jz = inertia[0] * p, inertia[1] * q, inertia[2] * r
         mx, my, mz = mx - (q * jz - r * jy), my - (r * jx - p * jz), mz - (p * jy - q * jx)
-    return [
+    out = [
         s[3], s[4], s[5],  # report eq. (2.1) / (A.5)-(A.7)
         # report eq. (2.2) / (A.11)-(A.13): -R e3 T / m + g e3, with R's third column (eq. 2.6)
         -(sf * sp + cf * cp * st) * a,
@@ -274,6 +288,46 @@ def rhs_values(s: list[float], u: list[float], mass: float, g: float, inertia: l
         *euler_rate_values(s[6:8], [p, q, r]),
         mx / inertia[0], my / inertia[1], mz / inertia[2],
     ]
+    if force is not None:
+        out[3], out[4], out[5] = out[3] + force[0] / mass, out[4] + force[1] / mass, out[5] + force[2] / mass
+    return out
+
+
+def rk4_values(s: list[float], u: list[float], h: float, mass: float, g: float, inertia: list[float], *,
+               gyroscopic: bool = False, force: list[float] | None = None, native: bool | None = None) -> list[float]:
+    """One classic Runge-Kutta (RK4) step of :func:`rhs_values` on Python floats, the inputs
+    and the force held over the step; compiled as :func:`rhs_values` is.
+
+    Parameters
+    ----------
+    s : list of 12 floats
+        The state now, as :func:`derivatives`.
+    u : list of 4 floats
+        ``[T, tau_x, tau_y, tau_z]``, N and N m, held over the step.
+    h : float
+        The step, s.
+    mass, g, inertia, gyroscopic, force, native
+        As :func:`rhs_values`.
+
+    Returns
+    -------
+    list of 12 floats
+        The state after the step. A state gone bad gives non-finite floats (compiled) or
+        raises ``ValueError`` / ``ZeroDivisionError`` inside :mod:`math` (Python): the caller
+        judges either.
+    """
+    if use_compiled(native, _rigid, "visloc.model._rigid"):
+        return _rigid.rk4(s, u, force, h, mass, g, inertia[0], inertia[1], inertia[2], gyroscopic)
+    half, sixth = 0.5 * h, h / 6.0
+
+    def f(x: list[float]) -> list[float]:
+        return rhs_values(x, u, mass, g, inertia, gyroscopic=gyroscopic, force=force, native=False)
+
+    k1 = f(s)
+    k2 = f([a + half * b for a, b in zip(s, k1, strict=True)])
+    k3 = f([a + half * b for a, b in zip(s, k2, strict=True)])
+    k4 = f([a + h * b for a, b in zip(s, k3, strict=True)])
+    return [a + sixth * (((b + 2.0 * c) + 2.0 * d) + e) for a, b, c, d, e in zip(s, k1, k2, k3, k4, strict=True)]
 
 
 def motor_lag_derivative(pwm_bar: ArrayLike, pwm_bar_cmd: ArrayLike, tau_c: float) -> FloatArray:

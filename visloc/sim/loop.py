@@ -394,8 +394,10 @@ class _Turbulence:
         """``force`` (or None) with this step's gust added."""
         if self.std <= 0.0:
             return force
-        self.gust = self.a * self.gust + math.sqrt(1 - self.a**2) * self.std * self.rng.normal(size=3)
-        self.gust[2] = 0.0
+        # a g + sqrt(1 - a^2) std n on floats (the same floats as on the arrays), no vertical gust
+        a, scale, (n0, n1, _) = self.a, math.sqrt(1 - self.a**2) * self.std, self.rng.normal(size=3).tolist()
+        g0, g1, _ = self.gust.tolist()
+        self.gust = np.array([a * g0 + scale * n0, a * g1 + scale * n1, 0.0])
         return self.gust if force is None else force + self.gust
 
 

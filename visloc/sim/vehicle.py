@@ -21,7 +21,7 @@ from visloc.control._checks import as_array, check_params, check_real, resolve_a
 from visloc.control.robustness import max_sigma
 from visloc.model.params import ARDRONE2, ARDrone2Params
 from visloc.model.propulsion import mixer_matrix, pwm_bar, pwm_bar_values
-from visloc.model.rigid_body import rhs_values, rotation_values
+from visloc.model.rigid_body import rhs_values, rk4_values, rotation_values
 from visloc.types import FloatArray
 
 __all__ = ["Vehicle", "motor_coefficients"]
@@ -171,16 +171,9 @@ class Vehicle:
         """
         f = None if force is None else as_array(force, "force", (3,)).tolist()
         u = self._u if self.motor_lag == 0.0 and self._bar is self._target else self.inputs.tolist()
-        return np.array(self._values(self.state.tolist(), u, f)[3:6])
-
-    def _values(self, s: list[float], u: list[float], force: list[float] | None) -> list[float]:
-        """The state's derivative on floats (:func:`visloc.model.rigid_body.rhs_values`) with
-        the external force's acceleration added."""
-        m = self.params.mass
-        out = rhs_values(s, u, m, self.params.g, self._inertia, gyroscopic=self.gyroscopic)
-        if force is not None:
-            out[3], out[4], out[5] = out[3] + force[0] / m, out[4] + force[1] / m, out[5] + force[2] / m
-        return out
+        p = self.params
+        return np.array(rhs_values(self.state.tolist(), u, p.mass, p.g, self._inertia, gyroscopic=self.gyroscopic,
+                                   force=f)[3:6])
 
     def step(self, pwm: ArrayLike, dt: float, force: ArrayLike | None = None) -> FloatArray:
         """Apply ``pwm`` for ``dt`` seconds; return the new state.
@@ -222,17 +215,13 @@ class Vehicle:
                 self._u = self.inputs.tolist()
             u = self._u
         fl = None if force is None else as_array(force, "force", (3,)).tolist()
-        s = self.state.tolist()
-        half, sixth = 0.5 * h, h / 6.0
-        try:  # classic RK4 on floats (the same operations, in the same order, as on arrays)
-            k1 = self._values(s, u, fl)
-            k2 = self._values([a + half * b for a, b in zip(s, k1, strict=True)], u, fl)
-            k3 = self._values([a + half * b for a, b in zip(s, k2, strict=True)], u, fl)
-            k4 = self._values([a + h * b for a, b in zip(s, k3, strict=True)], u, fl)
-            new = [a + sixth * (((b + 2.0 * c) + 2.0 * d) + e) for a, b, c, d, e in zip(s, k1, k2, k3, k4, strict=True)]
+        p = self.params
+        try:  # classic RK4 on floats
+            new = rk4_values(self.state.tolist(), u, h, p.mass, p.g, self._inertia, gyroscopic=self.gyroscopic,
+                             force=fl)
         except (OverflowError, ValueError, ZeroDivisionError):  # math's functions on a state gone bad
             new = [math.nan] * 12
-        if not all(math.isfinite(v) for v in new) or abs(math.cos(new[7])) < 1e-6:
+        if not all(map(math.isfinite, new)) or abs(math.cos(new[7])) < 1e-6:
             raise FloatingPointError(f"state not finite or at the pitch singularity at "
                                      f"t = {self.time + h:.3f} s: {np.array(new)!r}")
         self.state = np.array(new)

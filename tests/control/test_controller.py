@@ -169,6 +169,7 @@ def test_the_compiled_feedback_law_is_the_python_one():
 
     exact = sys.version_info < (3, 12)
     rng = np.random.default_rng(11)
+    saturated = 0
     for scale in (0.01, 0.3, 3.0):
         fast, plain = Controller(native=True), Controller(native=False)
         sp = np.array([0.5, -0.3, -1.0, 0.2])
@@ -182,7 +183,9 @@ def test_the_compiled_feedback_law_is_the_python_one():
                 np.testing.assert_allclose(a.pwm, b.pwm, rtol=1e-12, atol=1e-12)
                 np.testing.assert_allclose(fast.integral, plain.integral, rtol=1e-12, atol=1e-15)
             assert a.saturated == b.saturated and a.reason == b.reason
+            saturated += a.saturated
         assert np.any(fast.integral != 0.0)
+    assert 0 < saturated < 180  # both ways: commands within reach and clipped ones
 
 
 def test_native_must_be_a_bool_or_none():

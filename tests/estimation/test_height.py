@@ -1,7 +1,5 @@
 """Ultrasound height map, report eqs. 3.12-3.13, with its blind zones."""
 
-import math
-
 import numpy as np
 import pytest
 
@@ -59,18 +57,3 @@ def test_bad_parameters_named():
         ultrasound_reading([1.0, np.nan])
     with pytest.raises(TypeError, match="u_sens"):
         ultrasound_height(object())
-
-
-def test_one_float_reads_as_the_array_route_reads_it():
-    """A Python float takes a shorter route (a simulation reads one echo at a time): the same
-    floats and flags as the array route, at the blind-zone edges and on bad readings."""
-    edges = [0.0, -1.0, 1e-300, 5e-324, 1.0, 100.0, 335.5, 335.6, 400.0, math.nan, math.inf, -math.inf]
-    for u in edges + list(np.random.default_rng(2).uniform(-10, 400, 200)):
-        one, arr = ultrasound_height(float(u)), ultrasound_height(np.array([u]))
-        assert type(one.height) is float and type(one.valid) is bool
-        assert one.valid == bool(arr.valid[0]) and one.height == float(arr.height[0])
-    for h in [0.0, 0.1, 0.2, 0.2000001, 1.0, 2.75, 2.76, -1.0] + list(np.random.default_rng(3).uniform(-1, 4, 200)):
-        one = ultrasound_reading(float(h))
-        assert type(one) is float and one == float(ultrasound_reading(np.array([h]))[0])
-    with pytest.raises(ValueError, match="finite"):
-        ultrasound_reading(math.nan)

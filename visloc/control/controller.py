@@ -124,8 +124,7 @@ class Controller:
         self.params = check_params(params)
         if native is not None and not isinstance(native, bool):
             raise TypeError(f"native: expected None or a bool, got {type(native).__name__}")
-        use_compiled(native, _feedback, "visloc.control._feedback")  # True without the build: RuntimeError now
-        self.native = native
+        self._compiled = use_compiled(native, _feedback, "visloc.control._feedback")  # (True unbuilt: RuntimeError)
         if gains is not None and not isinstance(gains, ControllerGains):
             raise TypeError(f"gains: expected ControllerGains, got {type(gains).__name__}")
         self.gains = design_gains(self.params, specs=specs) if gains is None else gains
@@ -140,8 +139,8 @@ class Controller:
         self._K_rows = self._K.tolist()
         # the set-point part's columns (§4.4), of the rows of tau_x and tau_y (the bounded ones)
         self._K_setpoint_rows = self._K[1:3, _POSITION_COLUMNS].tolist()
-        self._K_bytes = self._K.astype(np.float64).tobytes()  # the same, for the compiled law
-        self._K_setpoint_bytes = np.ascontiguousarray(self._K[1:3, _POSITION_COLUMNS], np.float64).tobytes()
+        self._K_bytes = self._K.tobytes()  # the same, as the compiled law reads them
+        self._K_setpoint_bytes = self._K[1:3, _POSITION_COLUMNS].tobytes()
         self._gamma_inv_rows = self._gamma_inv.tolist()
         tilt = check_real(max_tilt, "max_tilt", positive=True, allow_inf=True)
         self.torque_bound = np.array([self.gains.roll.kp, self.gains.pitch.kp]) * tilt
@@ -270,7 +269,7 @@ class Controller:
         same operations in the same order."""
         integral = self._integral.tolist()
         zone, rate_zone = self.integral_zone.tolist(), self.integral_rate_zone.tolist()
-        if use_compiled(self.native, _feedback, "visloc.control._feedback"):
+        if self._compiled:
             return _feedback.feedback(x, integral, step, self._K_bytes, self._K_setpoint_bytes,
                                       self.torque_bound.tolist(), self.max_thrust_change, self.u0.tolist(), zone,
                                       rate_zone)

@@ -19,7 +19,6 @@ assumes low flight, so it means the lower blind zone; visloc reports ``h = -b`` 
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -79,11 +78,6 @@ def ultrasound_reading(height: object, *, a_z: float = A_Z, b_z: float = B_Z,
         ``u_sens`` (sensor units), 0 in the blind zones ``z >= b_z`` and ``z < c_z``.
     """
     a_z, b_z, c_z = _model(a_z, b_z, c_z)
-    if type(height) is float:  # one reading (a simulation's every echo): on the float, the same value
-        if not math.isfinite(height):
-            raise ValueError("height must be finite")
-        z = -height
-        return (z - b_z) / a_z if c_z <= z < b_z else 0.0
     try:
         h = np.asarray(height, dtype=np.float64)
     except (TypeError, ValueError) as exc:
@@ -125,17 +119,11 @@ def ultrasound_height(u_sens: object, *, a_h: float = A_Z, b_h: float = B_Z, b: 
     """
     a_h, b_h, c_z = _model(a_h, b_h, c_z)
     b = check_real(b, "b")
-    u_max = (c_z - b_h) / a_h
-    if type(u_sens) is float:  # one reading: the array route's operations on the float
-        finite = math.isfinite(u_sens)
-        uf = u_sens if finite else 0.0
-        valid = finite and 0.0 < uf <= u_max
-        z = c_z if finite and uf > u_max else (a_h * uf + b_h if valid else b)  # report eq. (3.13)
-        return HeightEstimate(height=-z, valid=valid)
     try:
         u = np.asarray(u_sens, dtype=np.float64)
     except (TypeError, ValueError) as exc:
         raise TypeError(f"u_sens must be numbers, got {type(u_sens).__name__}") from exc
+    u_max = (c_z - b_h) / a_h
     finite = np.isfinite(u)
     uf = np.where(finite, u, 0.0)
     valid = finite & (uf > 0.0) & (uf <= u_max)

@@ -281,20 +281,10 @@ def _side_levels(ends: NDArray, quad: NDArray, force: bool = False) -> NDArray:
 
 
 def refine_quads(
-    gray: NDArray[np.uint8],
-    quads: NDArray,
-    *,
-    radius: int | NDArray = 2,
-    iterations: int = 2,
-    max_iterations: int | None = None,
-    tolerance: float = 0.05,
-    count: int = 24,
-    response: str | float | NDArray = "srgb",
-    bend: bool = False,
-    bend_radius: int | None = None,
-    noisy_bend_radius: int | None = None,
-    levels: str = "auto",
-    native: bool | None = None,
+    gray: NDArray[np.uint8], quads: NDArray, *, radius: int | NDArray = 2, iterations: int = 2,
+    max_iterations: int | None = None, tolerance: float = 0.05, count: int = 24,
+    response: str | float | NDArray = "srgb", bend: bool = False, bend_radius: int | None = None,
+    noisy_bend_radius: int | None = None, levels: str = "auto", native: bool | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """Refine the corners of dark squares on a bright surround to sub-pixel accuracy.
 
@@ -312,14 +302,9 @@ def refine_quads(
         Passes; each re-centres the profiles on the previous pass's lines.
     max_iterations : int or None
         After ``iterations`` passes, more passes (up to this many in all) for the quads whose
-        corners still moved more than ``tolerance`` in the last one. Under blur wider than
-        the profiles the step's area is only partly inside the window, each pass moves the
-        side part of the way, and two passes stop short (on camera-like 640 x 480 renders
-        with strong blur, corners about 0.3 px RMS after 2 passes, 0.2 after up to 6). Only
-        quads whose largest corner move shrank by a fifth at every pass go on (blur; noise
-        moves the sides about as much each pass), and a pass that did not shrink it is not
-        taken.
-        ``None``: exactly ``iterations``.
+        corners still moved more than ``tolerance``, while each pass shrinks their largest
+        corner move by a fifth (blur wider than the profiles; :data:`_SHRINK`); a pass that
+        did not is not taken. ``None``: exactly ``iterations``.
     tolerance : float
         Largest corner move (px) of a converged pass.
     count : int
@@ -329,24 +314,19 @@ def refine_quads(
         edges are measured in linear intensity. ``"srgb"`` suits camera images and most
         files, ``"linear"`` linear sensor data and linear renders.
     bend : bool
-        Stage 8b on the refined quads with a side of 40 px or more: the corners where the
-        sides, fitted as quadratic curves, meet (:func:`bend_corners`, compiled alongside
-        stage 8).
+        Stage 8b (:func:`bend_corners`) on the refined quads with a side of 40 px or more.
     bend_radius : int or None
         Stage 8b's profile half-width at most, px (1-64; a quad's ``radius`` where smaller);
         None: ``radius``. The detector uses 3 (:class:`~visloc.markers.DetectorParams`).
     noisy_bend_radius : int or None
-        Stage 8b's half-width on a noisy quad, px (1-64, where smaller than the above): the
-        noise of its innermost or outermost samples (1.4826 / sqrt 2 times the median
-        difference of neighbouring profiles') is a tenth of its contrast or more (dark frames;
-        under 0.05 on the bench's hard camera-like frames). A narrower window loses the tails
-        of a blurred edge (its offsets shrink: a bias) but sums less noise, which wins where
-        the noise is large. None: no narrowing. The detector uses 2.
+        Stage 8b's half-width on a noisy quad, px (1-64, where smaller than the above): one
+        whose innermost or outermost samples' noise is a tenth of its contrast or more
+        (:data:`_NOISY`; a narrower window sums less noise at the cost of a small bias).
+        None: no narrowing. The detector uses 2.
     levels : {"auto", "side"}
         The black and white levels of a quad with a side of 40 px or more: ``"auto"`` each
         side's own where the light varies significantly along or across it, else the quad's;
-        ``"side"`` each side's own always (large squares with no marker inside, such as a
-        ChArUco board's, where the sides' end samples are clean).
+        ``"side"`` each side's own always (large plain squares, as a ChArUco board's).
     native : bool or None
         Run the compiled version (``True``) or the numpy one (``False``); ``None``: the
         compiled one when it was built (:data:`NATIVE_REFINE`).
@@ -368,15 +348,43 @@ def refine_quads(
     RuntimeError
         If ``native=True`` and the compiled module was not built.
     """
+    q0, r, lut, most, cap, narrow = _checked_args(gray, quads, radius, iterations, max_iterations, tolerance,
+                                                  count, response, levels, bend_radius, noisy_bend_radius)
+    if not len(q0):
+        return q0.copy(), np.ones(0, bool)
+    if use_compiled(native, _refine, "visloc.markers._refine"):
+        return _refine_compiled(gray, q0, r, iterations, count, lut, bend, levels == "side", most, tolerance, cap,
+                                narrow)
+    q, ok_all = _refine_passes(_to_light(gray, response), q0, r, iterations, most, tolerance, count, lut,
+                               levels == "side")
+    if bend:
+        _bend_long(gray, q, ok_all, r, cap, narrow, response, levels)
+    return q, ok_all
+
+
+def _bend_long(gray: NDArray[np.uint8], q: NDArray, ok: NDArray, r: NDArray, cap: int, narrow: int,
+               response: str | float | NDArray, levels: str) -> None:
+    """Stage 8b in place on the refined quads (K, 4, 2) that stood and have a side of 40 px
+    or more (short sides bend by a small fraction of a pixel), as ``_refine.c`` does."""
+    pick = ok & (_longest_sides(q) >= _BEND_MIN_SIDE)
+    if pick.any():
+        radius = _narrowed(gray, q[pick], np.minimum(r[pick], cap), narrow, response)
+        q[pick] = bend_corners(gray, q[pick], radius=radius, response=response, levels=levels)
+
+
+def _checked_args(gray: NDArray, quads: NDArray, radius: int | NDArray, iterations: int, max_iterations: int | None,
+                  tolerance: float, count: int, response: str | float | NDArray, levels: str,
+                  bend_radius: int | None, noisy_bend_radius: int | None) -> tuple:
+    """:func:`refine_quads`' inputs checked (ValueError naming the first bad one): the quads
+    (K, 4, 2) float64, the radii (K,), the response's table, the most passes, stage 8b's
+    widest half-width and its noisy half-width (0: none). No quads: the options unchecked."""
     if gray.ndim != 2 or gray.dtype != np.uint8:
         raise ValueError(f"gray must be a (H, W) uint8 image, got {gray.shape} {gray.dtype}")
     lut = response_lut(response)
     q0 = np.asarray(quads, np.float64).reshape(-1, 4, 2)
-    q = q0.copy()
-    k = len(q)
-    r = np.broadcast_to(np.asarray(radius, np.int64), (k,))
-    if k == 0:
-        return q, np.ones(0, bool)
+    r = np.broadcast_to(np.asarray(radius, np.int64), (len(q0),))
+    if not len(q0):
+        return q0, r, lut, 0, 0, 0
     if (r < 1).any() or (r > _MAX_RADIUS).any():
         raise ValueError(f"radius must be 1 to {_MAX_RADIUS} px, got {radius}")
     if not np.isfinite(q0).all():
@@ -389,14 +397,28 @@ def refine_quads(
     if levels not in ("auto", "side"):
         raise ValueError(f"levels must be 'auto' or 'side', got {levels!r}")
     cap = _optional_radius(bend_radius, "bend_radius") or _MAX_RADIUS
-    narrow = _optional_radius(noisy_bend_radius, "noisy_bend_radius")
-    if use_compiled(native, _refine, "visloc.markers._refine"):
-        g = np.ascontiguousarray(gray)
-        raw, raw_ok = _refine.refine_quads(g, g.shape[0], g.shape[1], np.ascontiguousarray(q0),
-                                           np.ascontiguousarray(r, np.int64), int(iterations), int(count), _END_GAP,
-                                           lut, bool(bend), levels == "side", most, float(tolerance), cap, narrow)
-        return np.frombuffer(raw, np.float64).reshape(k, 4, 2).copy(), np.frombuffer(raw_ok, np.uint8).astype(bool)
-    light = _to_light(gray, response)
+    return q0, r, lut, most, cap, _optional_radius(noisy_bend_radius, "noisy_bend_radius")
+
+
+def _refine_compiled(gray: NDArray[np.uint8], q0: NDArray, r: NDArray, iterations: int, count: int, lut: NDArray,
+                     bend: bool, side_levels: bool, most: int, tolerance: float, cap: int,
+                     narrow: int) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """:func:`refine_quads` in ``_refine.c`` (stage 8, and 8b when ``bend``): corners and ok."""
+    g = np.ascontiguousarray(gray)
+    raw, raw_ok = _refine.refine_quads(g, g.shape[0], g.shape[1], np.ascontiguousarray(q0),
+                                       np.ascontiguousarray(r, np.int64), int(iterations), int(count), _END_GAP,
+                                       lut, bool(bend), side_levels, most, float(tolerance), cap, narrow)
+    return np.frombuffer(raw, np.float64).reshape(-1, 4, 2).copy(), np.frombuffer(raw_ok, np.uint8).astype(bool)
+
+
+def _refine_passes(light: NDArray, q0: NDArray, r: NDArray, iterations: int, most: int, tolerance: float,
+                   count: int, lut: NDArray, side_levels: bool) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Stage 8's passes in numpy over quads (K, 4, 2) on the linear-light image: the corners
+    (the input where a first pass failed) and whether each quad stands. Under blur wider
+    than the profiles each pass moves a side part of the way (camera-like 640 x 480 renders
+    with strong blur: about 0.3 px RMS after 2 passes, 0.2 after up to 6)."""
+    q = q0.copy()
+    k = len(q)
     ok_all = np.ones(k, bool)
     busy = np.arange(k)  # the quads still refined: not failed, not converged
     last_move = np.full(k, np.inf)
@@ -404,7 +426,7 @@ def refine_quads(
     for it in range(most):
         last = it >= iterations - 1
         before = q[busy]
-        new, ok = _refine_pass(light, before, r[busy], count, lut, last, levels == "side")
+        new, ok = _refine_pass(light, before, r[busy], count, lut, last, side_levels)
         move = np.abs(new - before).max(axis=(1, 2))
         shrank = move <= _SHRINK * last_move[busy]
         take = ok & ((it < iterations) | shrank)  # a later pass that did not shrink the move is not taken
@@ -417,11 +439,6 @@ def refine_quads(
         if not len(busy):
             break
     q[~ok_all] = q0[~ok_all]
-    long_side = _longest_sides(q) >= _BEND_MIN_SIDE
-    if bend and (ok_all & long_side).any():  # short sides bend by a small fraction of a pixel
-        pick = ok_all & long_side
-        radius = _narrowed(gray, q[pick], np.minimum(r[pick], cap), narrow, response)
-        q[pick] = bend_corners(gray, q[pick], radius=radius, response=response, levels=levels)
     return q, ok_all
 
 
@@ -552,14 +569,8 @@ def edge_points(
 
 
 def bend_corners(
-    gray: NDArray[np.uint8],
-    quads: NDArray,
-    *,
-    radius: int | NDArray = 2,
-    count: int = 40,
-    end_gap: float = 0.08,
-    response: str | float | NDArray = "srgb",
-    levels: str = "auto",
+    gray: NDArray[np.uint8], quads: NDArray, *, radius: int | NDArray = 2, count: int = 40, end_gap: float = 0.08,
+    response: str | float | NDArray = "srgb", levels: str = "auto",
 ) -> NDArray[np.float64]:
     """Stage 8b: corners where the marker's sides are curves, not lines.
 
@@ -613,6 +624,19 @@ def bend_corners(
     _, normals, e, good = edge_points(gray, q, radius=radius, count=count, end_gap=end_gap, response=response,
                                       levels=levels)
     r = np.broadcast_to(np.asarray(radius, np.int64), (k,))
+    coef, w = _side_curves(e, good, end_gap)
+    out = _tangent_corners(q, normals, coef)
+    enough = (w.sum(axis=2) >= 6).all(axis=1)
+    ok = enough & np.isfinite(out).all(axis=(1, 2)) & (np.abs(out - q).max(axis=(1, 2)) < 1.0 + r)
+    return np.where(ok[:, None, None], out, q)
+
+
+def _side_curves(e: NDArray, good: NDArray, end_gap: float) -> tuple[NDArray, NDArray]:
+    """Quadratics ``c0 + c1 t + c2 t^2`` (K, 4, 3) fitted by weighted least squares to the
+    edge offsets ``e`` (K, 4, M), px, at ``t`` in ``end_gap .. 1 - end_gap`` along each side,
+    outliers of a first fit dropped; a side whose curvature is within 3 standard errors of 0
+    a line (``c2 = 0``). Also the weights (K, 4, M) of the second fit."""
+    k, _, count = e.shape
     w = good.astype(np.float64)
     t = np.linspace(end_gap, 1 - end_gap, count)
     basis = np.stack([np.ones(count), t, t * t], axis=-1)  # (M, 3)
@@ -634,8 +658,14 @@ def bend_corners(
         rhs = np.einsum("nm,mi,nm->ni", w[straight], basis[:, :2], e[straight])
         coef[straight] = np.concatenate([np.linalg.solve(g2, rhs[..., None])[..., 0],
                                          np.zeros((int(straight.sum()), 1))], axis=1)
-    # each corner where the tangents of the two curves at their ends meet (the curves bend by
-    # a fraction of a pixel, so this is their meeting point to far below the noise)
+    return coef, w
+
+
+def _tangent_corners(q: NDArray, normals: NDArray, coef: NDArray) -> NDArray:
+    """Each corner (K, 4, 2) of quads ``q`` where the tangents of its two sides' curves
+    (``coef`` (K, 4, 3), offsets along the outward ``normals`` (K, 4, 2)) at their ends meet
+    (the curves bend by a fraction of a pixel, so this is their meeting point to far below
+    the noise); NaN where the tangents are parallel."""
     d = q[:, _NEXT] - q
     at_end = coef[..., 0] + coef[..., 1] + coef[..., 2]  # offset at t = 1, (K, 4)
     a = q[:, _NEXT] + at_end[..., None] * normals  # side s ends at corner s + 1 ...
@@ -647,7 +677,4 @@ def bend_corners(
     den = np.where(np.abs(den) < 1e-9, np.nan, den)
     f = b - a
     u = (f[..., 0] * db[..., 1] - f[..., 1] * db[..., 0]) / den
-    out = a + u[..., None] * da
-    enough = (w.sum(axis=2) >= 6).all(axis=1)
-    ok = enough & np.isfinite(out).all(axis=(1, 2)) & (np.abs(out - q).max(axis=(1, 2)) < 1.0 + r)
-    return np.where(ok[:, None, None], out, q)
+    return a + u[..., None] * da

@@ -110,15 +110,8 @@ class MapPose:
 
 
 def estimate_camera_pose(
-    detections: list[MarkerDetection],
-    marker_map: MarkerMap,
-    camera: Camera,
-    *,
-    pixel_sigma: float | None = None,
-    max_residual: float = 3.0,
-    max_iter: int = 30,
-    n_starts: int = 2,
-    start: Pose | None = None,
+    detections: list[MarkerDetection], marker_map: MarkerMap, camera: Camera, *, pixel_sigma: float | None = None,
+    max_residual: float = 3.0, max_iter: int = 30, n_starts: int = 2, start: Pose | None = None,
 ) -> MapPose | None:
     """Pose of the camera in ``marker_map`` from the markers detected in one image.
 
@@ -166,6 +159,38 @@ def estimate_camera_pose(
         ``max_iter`` or ``n_starts`` not a whole number > 0; a detection of a map marker
         whose corners are not (4, 2) finite numbers (the message names the marker).
     """
+    _check_options(marker_map, camera, start, pixel_sigma, max_residual, max_iter, n_starts)
+    known, ids, repeated, unknown = _map_detections(detections, marker_map)
+    if not known:
+        return None
+    try:
+        px = np.array([d.corners for d in known], dtype=np.float64)  # (M, 4, 2)
+    except (TypeError, ValueError):  # ragged, or not numbers
+        px = None
+    if px is None or px.shape[1:] != (4, 2) or not all_finite(px):
+        raise ValueError(_bad_corners(known))
+    all_ids, all_corners = marker_map.stacked
+    obj = all_corners[np.searchsorted(all_ids, ids)]  # (M, 4, 3)
+    xy = camera.normalize(px.reshape(-1, 2)).reshape(-1, 4, 2)  # (M, 4, 2)
+    f = np.array([[camera.fx], [camera.fy]])
+    fit = _started_fit(start, known, ids, obj, xy, f, marker_map, max_iter, max_residual, n_starts)
+    if fit is None:
+        return None
+    best, keep, rejected, res, M = fit  # M: [J | r]^T [J | r] at best
+    rejected = repeated + rejected
+    n = 8 * int(keep.sum())  # residuals: two per corner
+    rms = float(np.sqrt(M[6, 6] / n))
+    cov = _covariance(M, n, pixel_sigma)
+    R = euler_to_matrix(best[3:])
+    pose = Pose(R, best[:3].copy(), rms, cov)
+    return MapPose(pose, [i for i, k in zip(ids, keep, strict=True) if k], rejected, unknown,
+                   {i: float(r) for i, r in zip(ids, res, strict=True)})
+
+
+def _check_options(marker_map: MarkerMap, camera: Camera, start: Pose | None, pixel_sigma: float | None,
+                   max_residual: float, max_iter: int, n_starts: int) -> None:
+    """TypeError or ValueError naming the first of :func:`estimate_camera_pose`'s options
+    that is wrong."""
     if not isinstance(marker_map, MarkerMap):
         raise TypeError(f"marker_map must be a MarkerMap, got {type(marker_map).__name__}")
     if not isinstance(camera, Camera):
@@ -181,52 +206,42 @@ def estimate_camera_pose(
                 or (integer and int(v) != v)):
             kind = "a whole number" if integer else "a finite number"
             raise ValueError(f"estimate_camera_pose: {name} must be {kind} > 0, got {v!r}")
+
+
+def _map_detections(detections: list[MarkerDetection],
+                    marker_map: MarkerMap) -> tuple[list[MarkerDetection], list[int], list[int], list[int]]:
+    """The detections of the map's markers seen once, their ids, the ids seen more than once
+    (which copy is the marker is unknown: none is used) and the ids not in the map, sorted."""
     known, missing = [], set()
     for d in detections:  # one pass over the detections
         if d.id in marker_map:
             known.append(d)
         else:
             missing.add(int(d.id))
-    unknown = sorted(missing)
     ids = [int(d.id) for d in known]
     repeated: list[int] = []
-    if len(set(ids)) < len(ids):  # which copy is the marker is unknown: none is used
+    if len(set(ids)) < len(ids):
         repeated = sorted({i for i in ids if ids.count(i) > 1})
         known = [d for d, i in zip(known, ids, strict=True) if i not in repeated]
         ids = [int(d.id) for d in known]
-    if not known:
-        return None
-    try:
-        px = np.array([d.corners for d in known], dtype=np.float64)  # (M, 4, 2)
-    except (TypeError, ValueError):  # ragged, or not numbers
-        px = None
-    if px is None or px.shape[1:] != (4, 2) or not all_finite(px):
-        raise ValueError(_bad_corners(known))
-    all_ids, all_corners = marker_map.stacked
-    obj = all_corners[np.searchsorted(all_ids, ids)]  # (M, 4, 3)
-    xy = camera.normalize(px.reshape(-1, 2)).reshape(-1, 4, 2)  # (M, 4, 2)
-    f = np.array([[camera.fx], [camera.fy]])
-    fit = None
+    return known, ids, repeated, sorted(missing)
+
+
+def _started_fit(start: Pose | None, known: list[MarkerDetection], ids: list[int], obj: FloatArray,
+                 xy: FloatArray, f: FloatArray, marker_map: MarkerMap, max_iter: int, max_residual: float,
+                 n_starts: int) -> tuple | None:
+    """The joint fit (:func:`_joint_fit`'s tuple) from ``start`` when no marker disagrees
+    with it, else from the markers' own poses (:func:`_best_start`); None: no start."""
     if start is not None:  # a pose near the answer: kept only if no marker disagrees with it
         fit = _joint_fit(np.concatenate([start.t, matrix_to_euler(start.R)]), obj, xy, f, ids,
                          max_iter, max_residual)
         _, kept, dropped, res, _ = fit
-        if dropped or res[kept].max() > max_residual:
-            fit = None
-    if fit is None:
-        first = _best_start(known, ids, obj, xy, f, marker_map, n_starts)
-        if first is None:
-            return None
-        fit = _joint_fit(first, obj, xy, f, ids, max_iter, max_residual)
-    best, keep, rejected, res, M = fit  # M: [J | r]^T [J | r] at best
-    rejected = repeated + rejected
-    n = 8 * int(keep.sum())  # residuals: two per corner
-    rms = float(np.sqrt(M[6, 6] / n))
-    cov = _covariance(M, n, pixel_sigma)
-    R = euler_to_matrix(best[3:])
-    pose = Pose(R, best[:3].copy(), rms, cov)
-    return MapPose(pose, [i for i, k in zip(ids, keep, strict=True) if k], rejected, unknown,
-                   {i: float(r) for i, r in zip(ids, res, strict=True)})
+        if not (dropped or res[kept].max() > max_residual):
+            return fit
+    first = _best_start(known, ids, obj, xy, f, marker_map, n_starts)
+    if first is None:
+        return None
+    return _joint_fit(first, obj, xy, f, ids, max_iter, max_residual)
 
 
 def _bad_corners(known: list[MarkerDetection]) -> str:

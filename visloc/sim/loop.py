@@ -93,7 +93,14 @@ class SimResult:
         ``estimate_rms_m``, ``max_tilt_deg``, ``saturated_fraction``, ``realtime_factor``,
         and for vision runs ``camera_frames``, ``vision_fixes``, ``vision_misses``; for step
         scenarios that reached their step the linear model's ``linear_settling_time_s``,
-        ``linear_overshoot_pct``, ``linear_height_dip_m`` (see :func:`simulate`).
+        ``linear_overshoot_pct``, ``linear_height_dip_m``; ``None`` where they do not apply.
+        ``settling_time_s`` is the time after the step or push (after t = 0 for a hover)
+        from which the position error stays within the scenario's band (5 % of a step, else
+        5 cm); ``overshoot_pct`` the travel beyond a step's target in % of the step;
+        ``position_rms_m`` the RMS distance from the set point over the whole run;
+        ``height_dip_m`` the largest height loss below the set point after the step or push;
+        ``estimate_rms_m`` the RMS distance between estimated and true position;
+        ``realtime_factor`` simulated seconds per wall-clock second.
     motors : dict
         The simulated motors' ``c`` and ``d`` (the controller uses the means).
     """
@@ -124,24 +131,11 @@ def _check_rate(value: float, name: str) -> float:
 
 
 def simulate(
-    scenario: str | Scenario,
-    *,
-    params: ARDrone2Params = ARDRONE2,
-    sigma: float = 0.0,
-    seed: int = 0,
-    arm: float | None = None,
-    specs: ControlSpecs | None = None,
-    gains: ControllerGains | None = None,
-    seconds: float | None = None,
-    dt: float | None = None,
-    control_rate: float = 200.0,
-    camera_rate: float = 30.0,
-    motor_lag: float = 0.0,
-    progress: Callable[[float], None] | None = None,
-    localizer: Callable | None = None,
-    warmup: float | None = None,
-    max_tilt: float = 0.3,
-    redetect_every: int = 10,
+    scenario: str | Scenario, *, params: ARDrone2Params = ARDRONE2, sigma: float = 0.0, seed: int = 0,
+    arm: float | None = None, specs: ControlSpecs | None = None, gains: ControllerGains | None = None,
+    seconds: float | None = None, dt: float | None = None, control_rate: float = 200.0, camera_rate: float = 30.0,
+    motor_lag: float = 0.0, progress: Callable[[float], None] | None = None, localizer: Callable | None = None,
+    warmup: float | None = None, max_tilt: float = 0.3, redetect_every: int = 10,
 ) -> SimResult:
     """Fly ``scenario`` in closed loop on the non-linear model: build the vehicle (motors
     drawn at ``sigma``), the controller, the sensors and the estimator, hover ``warmup`` s,
@@ -160,18 +154,15 @@ def simulate(
         Seeds the motor signs, the sensor noise and the turbulence.
     arm : float, optional
         Arm distance of eq. (2.12), m (:func:`visloc.control.resolve_arm`).
-    specs : ControlSpecs, optional
-        Loop specifications the controller is designed for when ``gains`` is not given.
-    gains : ControllerGains, optional
+    specs, gains : ControlSpecs, ControllerGains, optional
         Controller gains (default :func:`visloc.control.design_gains` of ``params`` and
-        ``specs``).
+        ``specs``, the loop specifications).
     seconds : float, optional
         Override the scenario's duration, s (> 0).
     dt : float, optional
-        RK4 step of the vehicle, s (> 0; rounded so that a whole number of steps fits in a
-        control period). Default: one step per control period without a motor lag (the
-        inputs are held over the period; the scenarios' states agree with 1 ms steps within
-        1e-8 m and rad), 1 ms with one (the lagged inputs change within the period).
+        RK4 step of the vehicle, s (> 0; rounded to a whole number of steps per control
+        period). Default: one step per control period without a motor lag (the inputs are
+        held over the period), 1 ms with one (the lagged inputs change within the period).
     control_rate, camera_rate : float
         Controller / IMU rate and bottom-camera rate, Hz (> 0).
     motor_lag : float
@@ -179,64 +170,62 @@ def simulate(
     progress : callable, optional
         Called with the simulated time after each simulated second.
     localizer : callable, optional
-        Vision front end of the ``"vision"`` estimator (see :class:`VisionEstimator`);
-        default visloc's marker tracker (``redetect_every``) and map localiser.
+        Vision front end of the ``"vision"`` estimator (:class:`VisionEstimator`'s).
     warmup : float, optional
-        Seconds of hover on the true state before t = 0, not recorded (the report's take-off
-        before its side steps): the integrators absorb the motors' spread first. Default
-        :data:`WARMUP_SECONDS` when ``sigma > 0``, else 0.
+        Seconds of hover on the true state before t = 0, not recorded (the report's take-off),
+        for the integrators to absorb the motors' spread. Default :data:`WARMUP_SECONDS` when
+        ``sigma > 0``, else 0.
     max_tilt : float
-        The controller's bound on the set-point part of the roll and pitch torques, as the
-        tilt it asks for, rad (report §4.4; :class:`visloc.control.Controller`); ``math.inf``:
-        unbounded, the report's controller before that bound (large set-point steps tip it
-        over).
+        Bound on the tilt the set-point part of the roll and pitch torques asks for, rad
+        (report §4.4; :class:`visloc.control.Controller`); ``math.inf``: unbounded.
     redetect_every : int
-        visloc's vision front end (:class:`VisionEstimator`): above 1 the markers followed
-        from frame to frame, the map's markers in the last fix's view joining at once, a full
-        marker detection only when following fails; 1: the full detection on every frame.
+        Above 1 the vision front end (:class:`VisionEstimator`) follows the markers from frame
+        to frame and detects them in full only when that fails; 1: in full every frame.
 
     Returns
     -------
     SimResult
-        Time, true and estimated state, set point, motor commands and saturation flags
-        sampled at ``control_rate``, with the exit :class:`SimStatus`, its reason and the
-        metrics below.
+        Time, true and estimated state, set point, motor commands and saturation flags at
+        ``control_rate``, the exit :class:`SimStatus`, its reason and the metrics.
 
     Raises
     ------
     TypeError
-        ``scenario`` neither a str nor a :class:`Scenario`; ``params`` not an
-        :class:`ARDrone2Params`; a number that is not a real number.
+        ``scenario`` not a str or :class:`Scenario`, ``params`` not :class:`ARDrone2Params`,
+        a number not a real number.
     ValueError
-        Unknown scenario name or estimator; ``seconds``, ``dt``, ``control_rate`` or
-        ``camera_rate`` not finite and > 0; ``sigma``, ``warmup`` or ``motor_lag`` negative;
-        ``sigma`` so large that a motor coefficient is not > 0; ``arm`` not > 0;
-        ``redetect_every`` not an integer >= 1.
-
-    Notes
-    -----
-    Metrics (``None`` where they do not apply): ``settling_time_s`` is the time after the step
-    or push (after t = 0 for a hover) from which the position error stays within the
-    scenario's band (5 % of a step, else 5 cm); ``overshoot_pct`` the travel beyond a step's
-    target in % of the step; ``position_rms_m`` the RMS distance from the set point over the
-    whole run; ``height_dip_m`` the largest height loss below the set point after the step
-    or push; ``estimate_rms_m`` the RMS distance between estimated and true position;
-    ``realtime_factor`` simulated seconds per wall-clock second.
+        Unknown scenario or estimator; ``seconds``, ``dt``, ``control_rate`` or ``camera_rate``
+        not finite and > 0; ``sigma``, ``warmup`` or ``motor_lag`` negative; ``sigma`` so large
+        a motor coefficient is not > 0; ``arm`` not > 0; ``redetect_every`` not an int >= 1.
     """
+    sc, p = _scenario_and_vehicle(scenario, params, arm)
+    duration, ctrl_dt, substeps, cam_dt = _checked_timing(sc, seconds, control_rate, motor_lag, dt, camera_rate,
+                                                          redetect_every)
+    rng = np.random.default_rng(seed)
+    vehicle, controller = _warmed_up(sc, p, sigma, seed, motor_lag, gains, specs, max_tilt, warmup, ctrl_dt,
+                                     substeps)
+    sensors, estimator = _estimator(sc, rng, cam_dt, vehicle.state.copy(), p.g, localizer, redetect_every)
+    result = fly(sc, vehicle, controller, estimator, sensors=sensors, seconds=duration, control_rate=control_rate,
+                 substeps=substeps, rng=rng, progress=progress)
+    result.motors["sigma"] = float(sigma)
+    return result
+
+
+def _scenario_and_vehicle(scenario: str | Scenario, params: ARDrone2Params,
+                          arm: float | None) -> tuple[Scenario, ARDrone2Params]:
+    """:func:`simulate`'s scenario (looked up by name) and vehicle parameters (with ``arm``)."""
     sc = get_scenario(scenario) if isinstance(scenario, str) else scenario
     if not isinstance(sc, Scenario):
         raise TypeError(f"scenario: expected a name or Scenario, got {type(scenario).__name__}")
     p = check_params(params)
-    p = replace(p, arm=resolve_arm(p, arm))
-    duration = sc.seconds if seconds is None else check_real(seconds, "seconds", positive=True)
-    ctrl_dt = 1.0 / _check_rate(control_rate, "control_rate")
-    lag = check_real(motor_lag, "motor_lag", nonneg=True)
-    h = _check_rate(dt, "dt") if dt is not None else (0.001 if lag > 0 else ctrl_dt)
-    substeps = max(1, round(ctrl_dt / h))
-    cam_dt = 1.0 / _check_rate(camera_rate, "camera_rate")
-    if isinstance(redetect_every, bool) or not isinstance(redetect_every, numbers.Integral) or redetect_every < 1:
-        raise ValueError(f"redetect_every must be an integer >= 1, got {redetect_every!r}")
-    rng = np.random.default_rng(seed)
+    return sc, replace(p, arm=resolve_arm(p, arm))
+
+
+def _warmed_up(sc: Scenario, p: ARDrone2Params, sigma: float, seed: int, motor_lag: float,
+               gains: ControllerGains | None, specs: ControlSpecs | None, max_tilt: float, warmup: float | None,
+               ctrl_dt: float, substeps: int) -> tuple[Vehicle, Controller]:
+    """:func:`simulate`'s vehicle (motors drawn at ``sigma``, trimmed to hover at the
+    scenario's start) and controller, after ``warmup`` s of hover on the true state."""
     c, d = motor_coefficients(p, sigma, seed=seed)
     vehicle = Vehicle(p, c=c, d=d, motor_lag=motor_lag, state=_at(sc.start_setpoint))
     vehicle.trim(np.full(4, hover_pwm(p)))
@@ -244,11 +233,23 @@ def simulate(
     lead = (WARMUP_SECONDS if sigma > 0 else 0.0) if warmup is None else check_real(
         warmup, "warmup", nonneg=True)
     _hover(vehicle, controller, sc.start_setpoint, round(lead / ctrl_dt), ctrl_dt, substeps, ctrl_dt / substeps)
-    sensors, estimator = _estimator(sc, rng, cam_dt, vehicle.state.copy(), p.g, localizer, redetect_every)
-    result = fly(sc, vehicle, controller, estimator, sensors=sensors, seconds=duration, control_rate=control_rate,
-                 substeps=substeps, rng=rng, progress=progress)
-    result.motors["sigma"] = float(sigma)
-    return result
+    return vehicle, controller
+
+
+def _checked_timing(sc: Scenario, seconds: float | None, control_rate: float, motor_lag: float, dt: float | None,
+                    camera_rate: float, redetect_every: int) -> tuple[float, float, int, float]:
+    """:func:`simulate`'s timing checked: the duration (s), the control period (s), RK4 steps
+    per control period and the camera period (s). With a motor lag the default step is 1 ms;
+    without one a step per control period (the scenarios' states agree with 1 ms steps within
+    1e-8 m and rad)."""
+    duration = sc.seconds if seconds is None else check_real(seconds, "seconds", positive=True)
+    ctrl_dt = 1.0 / _check_rate(control_rate, "control_rate")
+    lag = check_real(motor_lag, "motor_lag", nonneg=True)
+    h = _check_rate(dt, "dt") if dt is not None else (0.001 if lag > 0 else ctrl_dt)
+    cam_dt = 1.0 / _check_rate(camera_rate, "camera_rate")
+    if isinstance(redetect_every, bool) or not isinstance(redetect_every, numbers.Integral) or redetect_every < 1:
+        raise ValueError(f"redetect_every must be an integer >= 1, got {redetect_every!r}")
+    return duration, ctrl_dt, max(1, round(ctrl_dt / h)), cam_dt
 
 
 def fly(scenario: Scenario, vehicle: Vehicle, controller: Controller, estimator: TruthEstimator | VisionEstimator,
@@ -300,6 +301,30 @@ def fly(scenario: Scenario, vehicle: Vehicle, controller: Controller, estimator:
     ValueError
         ``seconds`` or ``control_rate`` not finite and > 0, ``substeps`` < 1.
     """
+    _check_objects(scenario, vehicle, controller, sensors, substeps)
+    sc, p = scenario, vehicle.params
+    duration = sc.seconds if seconds is None else check_real(seconds, "seconds", positive=True)
+    ctrl_dt = 1.0 / _check_rate(control_rate, "control_rate")
+    turbulence = _Turbulence(sc.gust_std, ctrl_dt, rng if rng is not None else np.random.default_rng(0))
+    wall = time.perf_counter()
+    records, ended = _run(sc, vehicle, controller, estimator, sensors, turbulence, round(duration / ctrl_dt) + 1,
+                          ctrl_dt, int(substeps), progress)
+    wall = time.perf_counter() - wall
+    metrics = run_metrics(sc, records[0], records[1], records[2], records[3], records[5], wall)
+    if sensors is not None:
+        metrics.update(camera_frames=sensors.frames, vision_fixes=estimator.fixes,  # type: ignore[union-attr]
+                       vision_misses=estimator.misses)  # type: ignore[union-attr]
+    if sc.step is not None and sc.trajectory is None and records[0][-1] > sc.step[0]:  # the linear model's answer
+        # to the same set-point step (none when the run ended at or before the step)
+        metrics.update(step_metrics_linear(controller.gains, p, sc, duration))
+    status, reason = ended if ended is not None else _ran_out(sc, metrics, duration)
+    motors = {"c": [float(v) for v in vehicle.c], "d": [float(v) for v in vehicle.d]}
+    return SimResult(sc.name, status, reason, *records[:5], records[5], metrics, motors)
+
+
+def _check_objects(scenario: Scenario, vehicle: Vehicle, controller: Controller, sensors: VisionSensors | None,
+                   substeps: int) -> None:
+    """TypeError or ValueError naming the first of :func:`fly`'s objects that is wrong."""
     if not isinstance(scenario, Scenario):
         raise TypeError(f"scenario: expected a Scenario, got {type(scenario).__name__}")
     if not isinstance(vehicle, Vehicle) or not isinstance(controller, Controller):
@@ -309,18 +334,21 @@ def fly(scenario: Scenario, vehicle: Vehicle, controller: Controller, estimator:
         raise TypeError(f"sensors: expected VisionSensors or None, got {type(sensors).__name__}")
     if isinstance(substeps, bool) or int(substeps) != substeps or substeps < 1:
         raise ValueError(f"substeps must be an integer >= 1, got {substeps!r}")
-    sc, p = scenario, vehicle.params
-    duration = sc.seconds if seconds is None else check_real(seconds, "seconds", positive=True)
-    ctrl_dt = 1.0 / _check_rate(control_rate, "control_rate")
-    h = ctrl_dt / int(substeps)
-    n = round(duration / ctrl_dt) + 1
+
+
+def _run(sc: Scenario, vehicle: Vehicle, controller: Controller, estimator: TruthEstimator | VisionEstimator,
+         sensors: VisionSensors | None, turbulence: _Turbulence, n: int, ctrl_dt: float, substeps: int,
+         progress: Callable[[float], None] | None) -> tuple[tuple, tuple[SimStatus, str] | None]:
+    """:func:`fly`'s loop over at most ``n`` control steps (report Figure 4.4). Returns the
+    records of the steps flown (times, states, estimates, set points, pwm, saturation) and
+    how the run ended early (None: it ran to the end)."""
+    p = vehicle.params
+    h = ctrl_dt / substeps
     t_out = np.arange(n) * ctrl_dt
     states, estimates = np.full((n, 12), np.nan), np.full((n, 12), np.nan)
     setpoints, pwms = np.full((n, 4), np.nan), np.full((n, 4), np.nan)
     saturated = np.zeros(n, bool)
-    turbulence = _Turbulence(sc.gust_std, ctrl_dt, rng if rng is not None else np.random.default_rng(0))
     ended: tuple[SimStatus, str] | None = None
-    wall = time.perf_counter()
     k = 0
     done = 0  # steps whose records are complete
     try:
@@ -342,7 +370,7 @@ def fly(scenario: Scenario, vehicle: Vehicle, controller: Controller, estimator:
             if ended is not None or k == n - 1:
                 break
             try:
-                for _ in range(int(substeps)):
+                for _ in range(substeps):
                     vehicle.step(cmd.pwm, h, force)
             except FloatingPointError as exc:
                 ended = SimStatus.DIVERGED, str(exc)
@@ -353,19 +381,8 @@ def fly(scenario: Scenario, vehicle: Vehicle, controller: Controller, estimator:
         if done == 0:
             raise
         ended, k = (SimStatus.INTERRUPTED, f"interrupted at t = {done * ctrl_dt:.2f} s"), done - 1
-    wall = time.perf_counter() - wall
     m = k + 1
-    records = (t_out[:m], states[:m], estimates[:m], setpoints[:m], pwms[:m], saturated[:m])
-    metrics = run_metrics(sc, records[0], records[1], records[2], records[3], records[5], wall)
-    if sensors is not None:
-        metrics.update(camera_frames=sensors.frames, vision_fixes=estimator.fixes,  # type: ignore[union-attr]
-                       vision_misses=estimator.misses)  # type: ignore[union-attr]
-    if sc.step is not None and sc.trajectory is None and records[0][-1] > sc.step[0]:  # the linear model's answer
-        # to the same set-point step (none when the run ended at or before the step)
-        metrics.update(step_metrics_linear(controller.gains, p, sc, duration))
-    status, reason = ended if ended is not None else _ran_out(sc, metrics, duration)
-    motors = {"c": [float(v) for v in vehicle.c], "d": [float(v) for v in vehicle.d]}
-    return SimResult(sc.name, status, reason, *records[:5], records[5], metrics, motors)
+    return (t_out[:m], states[:m], estimates[:m], setpoints[:m], pwms[:m], saturated[:m]), ended
 
 
 def _estimator(sc: Scenario, rng: np.random.Generator, cam_dt: float, initial: FloatArray, g: float,

@@ -382,6 +382,97 @@ def _check_options(command: str, recording: str, opts: list[str]) -> None:
         raise UsageError(f"--options {shlex.join(opts)!r} for {command}: {reason}") from None
 
 
+def _check_request(command: str, recordings: Sequence[str], opts: list[str], chunk: int | None) -> None:
+    """Refuse (:class:`UsageError`) ``opts`` holding what batch sets itself, a ``chunk`` other than
+    ``detect``'s or below 1, and options the command's parser refuses (checked on the first
+    recording, once)."""
+    if any(o in ("--out", "--quiet", "--frame-range") for o in opts):
+        raise UsageError("batch writes each recording's --out (and --frame-range) itself: leave --out, --quiet and "
+                         "--frame-range out of --options")
+    if chunk is not None and (command != "detect" or chunk < 1):
+        raise UsageError("--chunk needs detect (the other commands carry a filter from frame to frame) and >= 1 frame")
+    if recordings:
+        _check_options(command, recordings[0], opts)
+
+
+def _client(stack: contextlib.ExitStack, dd, scheduler: str | None, workers: int | None):
+    """A Dask client entered in ``stack``: on the running ``scheduler``, else on a local cluster
+    of ``workers`` single-threaded worker processes (default one per core), all of them up."""
+    if scheduler:
+        return stack.enter_context(dd.Client(scheduler))
+    import dask
+
+    n = workers or os.cpu_count() or 1
+    # workers started as plain processes are (no MALLOC_TRIM_THRESHOLD_: _plain_malloc);
+    # forked where the platform can (Linux): a spawned worker imports Python, Dask and
+    # visloc anew, about 1.5 s of the two cores before the first frame
+    config = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
+    if "fork" in multiprocessing.get_all_start_methods() and sys.platform.startswith("linux"):
+        config["distributed.worker.multiprocessing-method"] = "fork"
+    stack.enter_context(dask.config.set(config))
+    cluster = stack.enter_context(dd.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                                  dashboard_address=":0"))  # any free port
+    client = stack.enter_context(dd.Client(cluster))
+    # every worker up before the first task: tasks submitted while one worker is
+    # connected all go to it (the others would sit idle until work stealing moves one)
+    client.wait_for_workers(n)
+    return client
+
+
+def _submit(client, command: str, opts: list[str], todo: list[tuple[str, str]], chunk: int | None
+            ) -> tuple[list, dict[str, tuple[int, int]], dict[int, list]]:
+    """Submit one :func:`run_one` task per recording of ``todo``, or per ``chunk`` of frames:
+    ``(futures, owner, pending)``, ``owner`` mapping a task's key to ``(recording index, chunk
+    index)``, ``pending`` each recording's chunk results (None until they arrive)."""
+    futures, owner = [], {}
+    pending: dict[int, list] = {}
+    for i, (rec, target) in enumerate(todo):
+        ranges = _chunks(rec, chunk)
+        pending[i] = [None] * len(ranges)
+        for k, (a, b) in enumerate(ranges):
+            extra = [] if len(ranges) == 1 else ["--frame-range", f"{a}:{'' if b is None else b}"]
+            out_k = target if len(ranges) == 1 else f"{target}.chunk{k:05d}"
+            fut = client.submit(run_one, command, rec, [*opts, *extra], out_k, pure=False,
+                                key=f"visloc-{i}-{k}-{Path(rec).name}")
+            futures.append(fut)
+            owner[fut.key] = (i, k)
+    return futures, owner, pending
+
+
+def _run_tasks(command: str, opts: list[str], todo: list[tuple[str, str]], out: Path,
+               results: list[RecordingResult], finished: set[str], *, chunk: int | None, workers: int | None,
+               scheduler: str | None, progress: Callable[[RecordingResult], None] | None,
+               dashboard: Callable[[str], None] | None) -> None:
+    """Run ``todo`` on Dask: each recording's result appended to ``results`` (and given to
+    ``progress``) as its last task finishes, its output added to ``finished`` and the manifest
+    when it finished; on any exception the tasks are cancelled and the summary written."""
+    dd = load_dask()
+    with contextlib.ExitStack() as stack:
+        client = _client(stack, dd, scheduler, workers)
+        if dashboard is not None and _has_dashboard(client):
+            dashboard(client.dashboard_link)
+        futures, owner, pending = _submit(client, command, opts, todo, chunk)
+        try:
+            for fut in dd.as_completed(futures):
+                i, k = owner[fut.key]
+                pending[i][k] = fut.result()
+                if any(p is None for p in pending[i]):
+                    continue
+                rec, target = todo[i]
+                parts = pending[i]
+                res = parts[0] if len(parts) == 1 else _merge(rec, target, parts, command)
+                results.append(res)
+                if res.status in ("done", "partial"):
+                    finished.add(Path(target).name)
+                    _write_manifest(out, command, opts, finished)
+                if progress is not None:
+                    progress(res)
+        except BaseException:
+            client.cancel(futures)
+            write_summary(out, results)
+            raise
+
+
 def run_batch(command: str, recordings: Sequence[str], options: str | Sequence[str], outdir: str | os.PathLike[str],
               *, workers: int | None = None, scheduler: str | None = None, force: bool = False,
               chunk: int | None = None,
@@ -435,13 +526,7 @@ def run_batch(command: str, recordings: Sequence[str], options: str | Sequence[s
         recording); ``chunk`` with another command than ``detect`` or below 1.
     """
     opts = shlex.split(options) if isinstance(options, str) else list(options)
-    if any(o in ("--out", "--quiet", "--frame-range") for o in opts):
-        raise UsageError("batch writes each recording's --out (and --frame-range) itself: leave --out, --quiet and "
-                         "--frame-range out of --options")
-    if chunk is not None and (command != "detect" or chunk < 1):
-        raise UsageError("--chunk needs detect (the other commands carry a filter from frame to frame) and >= 1 frame")
-    if recordings:
-        _check_options(command, recordings[0], opts)
+    _check_request(command, recordings, opts, chunk)
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     todo, results = plan(command, recordings, opts, out, force=force)
@@ -452,59 +537,7 @@ def run_batch(command: str, recordings: Sequence[str], options: str | Sequence[s
     finished = (_finished(out, command, opts) - {Path(t).name for _, t in todo}) | {Path(r.output).name for r in results}
     _write_manifest(out, command, opts, finished)
     if todo:
-        dd = load_dask()
-        with contextlib.ExitStack() as stack:
-            if scheduler:
-                client = stack.enter_context(dd.Client(scheduler))
-            else:
-                import dask
-
-                n = workers or os.cpu_count() or 1
-                # workers started as plain processes are (no MALLOC_TRIM_THRESHOLD_: _plain_malloc);
-                # forked where the platform can (Linux): a spawned worker imports Python, Dask and
-                # visloc anew, about 1.5 s of the two cores before the first frame
-                config = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
-                if "fork" in multiprocessing.get_all_start_methods() and sys.platform.startswith("linux"):
-                    config["distributed.worker.multiprocessing-method"] = "fork"
-                stack.enter_context(dask.config.set(config))
-                cluster = stack.enter_context(dd.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                                              dashboard_address=":0"))  # any free port
-                client = stack.enter_context(dd.Client(cluster))
-                # every worker up before the first task: tasks submitted while one worker is
-                # connected all go to it (the others would sit idle until work stealing moves one)
-                client.wait_for_workers(n)
-            if dashboard is not None and _has_dashboard(client):
-                dashboard(client.dashboard_link)
-            futures, owner = [], {}
-            pending: dict[int, list] = {}
-            for i, (rec, target) in enumerate(todo):
-                ranges = _chunks(rec, chunk)
-                pending[i] = [None] * len(ranges)
-                for k, (a, b) in enumerate(ranges):
-                    extra = [] if len(ranges) == 1 else ["--frame-range", f"{a}:{'' if b is None else b}"]
-                    out_k = target if len(ranges) == 1 else f"{target}.chunk{k:05d}"
-                    fut = client.submit(run_one, command, rec, [*opts, *extra], out_k, pure=False,
-                                        key=f"visloc-{i}-{k}-{Path(rec).name}")
-                    futures.append(fut)
-                    owner[fut.key] = (i, k)
-            try:
-                for fut in dd.as_completed(futures):
-                    i, k = owner[fut.key]
-                    pending[i][k] = fut.result()
-                    if any(p is None for p in pending[i]):
-                        continue
-                    rec, target = todo[i]
-                    parts = pending[i]
-                    res = parts[0] if len(parts) == 1 else _merge(rec, target, parts, command)
-                    results.append(res)
-                    if res.status in ("done", "partial"):
-                        finished.add(Path(target).name)
-                        _write_manifest(out, command, opts, finished)
-                    if progress is not None:
-                        progress(res)
-            except BaseException:
-                client.cancel(futures)
-                write_summary(out, results)
-                raise
+        _run_tasks(command, opts, todo, out, results, finished, chunk=chunk, workers=workers, scheduler=scheduler,
+                   progress=progress, dashboard=dashboard)
     write_summary(out, results)
     return results

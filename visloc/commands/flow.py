@@ -112,6 +112,23 @@ def _say_unused(args: argparse.Namespace, gyro_log, gyro_used: int, pairs: int, 
         warn("flow", f"no motion could be measured in any of the {pairs} frame pairs (too little texture?)")
 
 
+def _start_track(args: argparse.Namespace, ego, frame, cam: Camera, height: float | None, row: dict, out, rec):
+    """A new ``EgoMotion`` (the track's origin) fed ``frame``, the run's first frame or one of
+    another size than ``ego``'s (a warning then); its row (``"first frame"``, position 0) is
+    written and logged. Returns the new ``EgoMotion``."""
+    from visloc.flow import EgoMotion
+
+    if ego is not None:
+        warn("flow", f"{frame.name} has another size than the frame before: the track restarts")
+    ego = EgoMotion(cam, options={"method": args.method, "direct": args.direct, "shadows": args.shadows})
+    ego.update(frame.image, height=height)
+    if out:
+        out.write(row | {"quality": 0.0, "reason": "first frame", "x": 0.0, "y": 0.0, "yaw": 0.0})
+    if rec:
+        rec.log_flow(frame.index, frame.time, frame.image, None, None, (0.0, 0.0))
+    return ego
+
+
 def flow(args: argparse.Namespace) -> int:
     """``visloc flow``: ground velocity and integrated track of a downward camera.
 
@@ -158,15 +175,8 @@ def flow(args: argparse.Namespace) -> int:
                 continue
             cam = camera_for(camera, frame.image.shape, warned, "flow")
             if ego is None or ego.frame_shape != frame.image.shape[:2]:
-                if ego is not None:
-                    warn("flow", f"{frame.name} has another size than the frame before: the track restarts")
-                ego = EgoMotion(cam, options={"method": args.method, "direct": args.direct, "shadows": args.shadows})
-                ego.update(frame.image, height=height)
+                ego = _start_track(args, ego, frame, cam, height, row, out, rec)
                 last_time = frame.time
-                if out:
-                    out.write(row | {"quality": 0.0, "reason": "first frame", "x": 0.0, "y": 0.0, "yaw": 0.0})
-                if rec:
-                    rec.log_flow(frame.index, frame.time, frame.image, None, None, (0.0, 0.0))
                 continue
             dt = frame.time - last_time
             if not dt > 0:  # recorded and skipped, the run goes on from the last good frame

@@ -126,10 +126,7 @@ def localize(args: argparse.Namespace) -> int:
             back = frame.image is not None and last_t is not None and frame.time < last_t  # recorded, skipped
             if frame.image is None or back:
                 failed += 1
-                warn("localize", f"{frame.name}: time {frame.time} s before the previous frame's {last_t} s; skipped"
-                     if back else frame.error or f"cannot read {frame.name}")
-                if out:
-                    out.write(row | {"fix": "time went back" if back else "unreadable"})
+                _skip_frame(out, row, frame, back, last_t)
                 continue
             cam = camera_for(camera, frame.image.shape, warned, "localize")
             mp = estimate_camera_pose(find(frame.image, cam, last_pose), mmap, cam, start=last_pose)  # from the last fix
@@ -139,15 +136,12 @@ def localize(args: argparse.Namespace) -> int:
                 # mean specific force over the interval (camera axes), turned into the map frame
                 force = mean_between(imu, last_t, frame.time)
                 imu_used += force is not None
-            fusion.predict(frame.time, force, R_map_cam if force is not None else None)
+            fix = _fuse(fusion, frame.time, force, R_map_cam, mp)
+            fixes += fix == "used"
             last_t = frame.time
             frame_times.append(frame.time)
             if mp is not None:
                 R_map_cam = mp.R_map_cam
-            fix = "none"
-            if mp is not None:  # the pose's own covariance, floored (visloc.estimation.fusion)
-                fix = "used" if fusion.fix(mp.position, mp.position_covariance) else "rejected"
-                fixes += fix == "used"
             columns, pos = _estimate(fusion)
             row |= {"markers": len(mp.used) if mp is not None else 0, "fix": fix} | columns
             true_pos = _truth_at(truth, frame.time)
@@ -163,11 +157,37 @@ def localize(args: argparse.Namespace) -> int:
                 rec.log_localize(frame.index, frame.time, frame.image, pos, true_pos)
     _say_unused(args, imu, imu_used, frame_times, truth, outside, fixes if n_frames > failed else None)
     if not args.quiet:
-        err = f", median position error {1e3 * float(np.median(errors)):.1f} mm" if errors else ""
-        used = f", IMU between {imu_used} frame pairs" if imu is not None else ""
-        print(f"visloc localize: {n_frames} frames, {fixes} position fixes, {failed} unreadable{used}{err}",
-              file=sys.stderr)
+        _say_done(n_frames, fixes, failed, imu_used if imu is not None else None, errors)
     return 1 if failed else 0
+
+
+def _skip_frame(out, row: dict, frame, back: bool, last_t: float | None) -> None:
+    """Warn about and record (``fix`` column) a frame the run skips: unreadable, or (``back``)
+    timed before the previous frame's ``last_t`` (s)."""
+    warn("localize", f"{frame.name}: time {frame.time} s before the previous frame's {last_t} s; skipped"
+         if back else frame.error or f"cannot read {frame.name}")
+    if out:
+        out.write(row | {"fix": "time went back" if back else "unreadable"})
+
+
+def _fuse(fusion, t: float, force: np.ndarray | None, R_map_cam: np.ndarray | None, mp) -> str:
+    """One filter step at frame time ``t`` (s): predict with the mean specific force (camera
+    axes, turned into the map frame by ``R_map_cam``) if any, then the pose's position fix if
+    any; returns the row's ``fix`` column (``"used"``, ``"rejected"`` or ``"none"``)."""
+    fusion.predict(t, force, R_map_cam if force is not None else None)
+    if mp is None:
+        return "none"
+    # the pose's own covariance, floored (visloc.estimation.fusion)
+    return "used" if fusion.fix(mp.position, mp.position_covariance) else "rejected"
+
+
+def _say_done(n_frames: int, fixes: int, failed: int, imu_used: int | None, errors: list[float]) -> None:
+    """The run's summary line on stderr: frames, fixes, unreadable frames, frame pairs the IMU
+    was used between (``imu_used`` None: no IMU) and the median position error (``errors``, m)."""
+    err = f", median position error {1e3 * float(np.median(errors)):.1f} mm" if errors else ""
+    used = f", IMU between {imu_used} frame pairs" if imu_used is not None else ""
+    print(f"visloc localize: {n_frames} frames, {fixes} position fixes, {failed} unreadable{used}{err}",
+          file=sys.stderr)
 
 
 def _estimate(fusion) -> tuple[dict, np.ndarray | None]:
@@ -258,6 +278,32 @@ def _send_body(link, map_frame: str, bp, t: float) -> None:
     link.send_vision_position(t, F @ bp.position, matrix_to_euler_list(R[None])[0])
 
 
+def _check_track_inputs(body: MarkerMap, reference: MarkerMap, poles) -> None:
+    """Refuse, before any frame, body and reference maps sharing marker ids (``track_body``
+    would refuse every frame) and observer poles ``LuenbergerObserver`` refuses: a
+    :class:`UsageError` each."""
+    from visloc.estimation import LuenbergerObserver
+
+    shared = sorted(set(body.ids.tolist()) & set(reference.ids.tolist()))
+    if shared:  # track_body would refuse every frame
+        raise UsageError(f"--body and --reference share marker ids {shared[:10]}: a detection could not be told apart")
+    try:
+        LuenbergerObserver(poles, 1.0 / 30.0)
+    except ValueError as exc:
+        raise UsageError(f"--poles: {exc}") from None
+
+
+def _udp_target(udp: str | None) -> tuple[str, int] | None:
+    """``--udp HOST:PORT`` as a socket address (None without it); a malformed one is a
+    :class:`UsageError`."""
+    if not udp:
+        return None
+    host, _, port = udp.rpartition(":")
+    if not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise UsageError(f"--udp must be HOST:PORT, got {udp!r}")
+    return (host, int(port))
+
+
 def track(args: argparse.Namespace) -> int:
     """``visloc track``: pose of a body relative to reference markers, per frame, with an
     observer velocity (report eq. 3.14), as JSON lines and optionally UDP datagrams.
@@ -282,22 +328,11 @@ def track(args: argparse.Namespace) -> int:
 
     body = MarkerMap.from_file(args.body)
     reference = MarkerMap.from_file(args.reference)
-    shared = sorted(set(body.ids.tolist()) & set(reference.ids.tolist()))
-    if shared:  # checked here, before any frame (track_body would refuse every one)
-        raise UsageError(f"--body and --reference share marker ids {shared[:10]}: a detection could not be told apart")
-    try:
-        LuenbergerObserver(args.poles, 1.0 / 30.0)  # the poles checked before any frame
-    except ValueError as exc:
-        raise UsageError(f"--poles: {exc}") from None
+    _check_track_inputs(body, reference, args.poles)  # before any frame
     dictionary_for(args, "track", body, reference)
     find = finder_for(detector_for(args), args).detect
     camera = Camera.from_file(args.camera)
-    target = None
-    if args.udp:
-        host, _, port = args.udp.rpartition(":")
-        if not host or not port.isdigit() or not 0 < int(port) < 65536:
-            raise UsageError(f"--udp must be HOST:PORT, got {args.udp!r}")
-        target = (host, int(port))
+    target = _udp_target(args.udp)
     failed = n_frames = lost = 0
     observer = None
     last_time = None

@@ -353,10 +353,7 @@ def block_flow(
         (0 for blocks without texture or with an ambiguous or out-of-range match).
     """
     a, b_img = check_pair(prev, curr)
-    if mode not in MODES:
-        raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
-    if prior is not None and (np.shape(prior) != (2,) or not np.isfinite(np.asarray(prior, np.float64)).all()):
-        raise ValueError(f"prior must be two finite numbers (dx, dy) in px, got {prior!r}")
+    _check_mode_and_prior(mode, prior)
     h, w = a.shape
     bsz, stp, srch, gsrch = _sizes(a.shape, block, step, search, global_search)
     rows, cols = (h // stp) * stp, (w // stp) * stp
@@ -364,15 +361,7 @@ def block_flow(
     grad = mode == "gradient"
     ia, ib = _integral(a), _integral(b_img)
     gxa, gya = _groups(ia, a, stp, rows, cols)
-    # global shift from the central third of the rows (columns): a yaw rotation smears the
-    # profile of a band by its length times the angle, so the band is kept short
-    ny, nx = len(gxa), len(gya)
-    r0, r1, c0, c1 = ny // 3, ny - ny // 3, nx // 3, nx - nx // 3
-    ga = _global_profiles(ia, r0 * stp, r1 * stp, c0 * stp, c1 * stp, rows, cols, grad)
-    gb = _global_profiles(ib, r0 * stp, r1 * stp, c0 * stp, c1 * stp, rows, cols, grad)
-    near = (None, None) if prior is None else (round(float(prior[0])), round(float(prior[1])))
-    sx = _global_shift(ga[0], gb[0], gsrch, near[0])
-    sy = _global_shift(ga[1], gb[1], gsrch, near[1])
+    sx, sy = _global_shifts(ia, ib, (len(gxa), len(gya)), stp, rows, cols, grad, gsrch, prior)
     gxb, gyb = _groups(ib, b_img, stp, rows, cols, sx, sy)
     # every block's x profile (from its rows' band) and y profile (from its columns' band),
     # as one list of segments: band row, start, and the second frame's offset for each
@@ -380,12 +369,56 @@ def block_flow(
     lx, ly = cols - grad, rows - grad  # profile lengths
     key = (rows, cols, bsz, stp, srch, lx, ly, seg_len)
     lay = _layout(*key)
+    pad = srch + 1 + max(abs(sx), abs(sy))
+    P, Q = _stacked_profiles((gxa, gya, gxb, gyb), lay, k, grad, pad, (sx, sy), (lx, ly))
+    moved, ok = _search(key, sx, sy)  # which shifts keep each segment on the profile
+    d0 = pad + int(lay.d[0])
+    cost = _costs(P, Q, lay, d0, k, seg_len, grad, ok)
+    best = cost.argmin(axis=0)
+    p_seg, q3 = _matched_segments(P, Q, lay, best, d0, seg_len, grad)
+    off, ratio = _best_shifts(cost, best, p_seg, q3, lay.index)
+    disp = moved[best, lay.index] + off  # (S,): x segments, then y segments
+    return FlowField(lay.centers, disp.reshape(2, -1).T.copy(), _confidence(p_seg, ratio), bsz, (w, h))
+
+
+def _check_mode_and_prior(mode: str, prior: tuple[float, float] | None) -> None:
+    """:func:`block_flow`'s ``mode`` and ``prior`` checked (a ValueError naming the bad one)."""
+    if mode not in MODES:
+        raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+    if prior is not None and (np.shape(prior) != (2,) or not np.isfinite(np.asarray(prior, np.float64)).all()):
+        raise ValueError(f"prior must be two finite numbers (dx, dy) in px, got {prior!r}")
+
+
+def _global_shifts(ia: NDArray, ib: NDArray, groups: tuple[int, int], stp: int, rows: int, cols: int,
+                   grad: bool, gsrch: int, prior: tuple[float, float] | None) -> tuple[int, int]:
+    """Whole-image integer shift (sx, sy), px, of the second frame's content from the
+    summed-area tables ``ia`` and ``ib`` of both frames (``groups``: the number of ``stp``-px
+    row and column groups), searched within ``gsrch`` px (near ``prior`` when given)."""
+    # global shift from the central third of the rows (columns): a yaw rotation smears the
+    # profile of a band by its length times the angle, so the band is kept short
+    ny, nx = groups
+    r0, r1, c0, c1 = ny // 3, ny - ny // 3, nx // 3, nx - nx // 3
+    ga = _global_profiles(ia, r0 * stp, r1 * stp, c0 * stp, c1 * stp, rows, cols, grad)
+    gb = _global_profiles(ib, r0 * stp, r1 * stp, c0 * stp, c1 * stp, rows, cols, grad)
+    near = (None, None) if prior is None else (round(float(prior[0])), round(float(prior[1])))
+    sx = _global_shift(ga[0], gb[0], gsrch, near[0])
+    sy = _global_shift(ga[1], gb[1], gsrch, near[1])
+    return sx, sy
+
+
+def _stacked_profiles(groups: tuple[NDArray, NDArray, NDArray, NDArray], lay: _Layout, k: int, grad: bool,
+                      pad: int, shift: tuple[int, int], lengths: tuple[int, int]) -> tuple[NDArray, NDArray]:
+    """The profiles of both frames from their band sums ``groups`` (gxa, gya, gxb, gyb), one
+    row per band: ``P`` (bands, length) of the first frame, ``Q`` (bands, length + 2 pad) of
+    the second, placed ``pad`` minus the global ``shift`` (sx, sy) px along; ``lengths``:
+    the x and y profiles' lengths (lx, ly)."""
+    gxa, gya, gxb, gyb = groups
+    (sx, sy), (lx, ly) = shift, lengths
     nby, nb = lay.nby, lay.nby + lay.nbx
     # the first frame's profiles P (one row per band: x profiles of the row bands, then y
     # profiles of the column bands) and the second frame's, Q, placed in a wider array so that
     # one window offset per search step serves both directions: Q[b, pad + x + d] is the second
     # frame's sample x + d along the profile further than the global shift of its direction
-    pad = srch + 1 + max(abs(sx), abs(sy))
     dtype = np.float32 if grad else np.float64  # (intensity costs subtract large sums)
     P = np.zeros((nb, lay.length), dtype)
     Q = np.zeros((nb, lay.length + 2 * pad), dtype)
@@ -393,8 +426,14 @@ def block_flow(
     _profile(gya, k, grad, P[nby:, :ly])
     _profile(gxb, k, grad, Q[:nby, pad - sx : pad - sx + lx])
     _profile(gyb, k, grad, Q[nby:, pad - sy : pad - sy + ly])
-    moved, ok = _search(key, sx, sy)  # which shifts keep each segment on the profile
-    d0 = pad + int(lay.d[0])
+    return P, Q
+
+
+def _costs(P: NDArray, Q: NDArray, lay: _Layout, d0: int, k: int, seg_len: int, grad: bool,
+           ok: NDArray) -> NDArray:
+    """Matching cost (D, S) of every segment at every search offset: the sum of squared
+    differences of its profile in ``P`` and ``Q`` (in intensity mode with each window's mean
+    removed), ``_BIG`` where ``ok`` is False; ``d0`` is the offset in ``Q`` of the first shift."""
     e = _windows(Q, lay.length)[:, d0 : d0 + len(lay.d)] - P[:, None, :]  # (nb, D, length)
     if grad:
         np.multiply(e, e, out=e)
@@ -403,16 +442,20 @@ def block_flow(
         s1 = _segment_sums(e, lay, k, seg_len)
         np.multiply(e, e, out=e)
         sums = _segment_sums(e, lay, k, seg_len) - s1 * s1 / seg_len
-    cost = np.where(ok, sums.transpose(1, 0, 2)[:, lay.band, lay.chunk], _BIG)  # (D, S)
-    best = cost.argmin(axis=0)
+    return np.where(ok, sums.transpose(1, 0, 2)[:, lay.band, lay.chunk], _BIG)  # (D, S)
+
+
+def _matched_segments(P: NDArray, Q: NDArray, lay: _Layout, best: NDArray, d0: int, seg_len: int,
+                      grad: bool) -> tuple[NDArray, NDArray]:
+    """Each segment's first-frame profile ``p_seg`` (S, L) and the second frame's one step
+    before, at and after its best shift ``best`` (S,) ``q3`` (S, 3, L) (``d0``: the offset in
+    ``Q`` of the first shift), with their means removed in intensity mode."""
     p_seg = _windows(P, seg_len)[lay.band, lay.start]  # (S, L)
     q3 = _windows(Q, seg_len)[lay.band[:, None], (lay.start + best + d0)[:, None] + _NEIGHBOURS]  # (S, 3, L)
     if not grad:
         p_seg = p_seg - p_seg.mean(axis=1, keepdims=True)
         q3 = q3 - q3.mean(axis=2, keepdims=True)
-    off, ratio = _best_shifts(cost, best, p_seg, q3, lay.index)
-    disp = moved[best, lay.index] + off  # (S,): x segments, then y segments
-    return FlowField(lay.centers, disp.reshape(2, -1).T.copy(), _confidence(p_seg, ratio), bsz, (w, h))
+    return p_seg, q3
 
 
 def _sizes(shape: tuple[int, int], block: int | None, step: int | None, search: int | None,

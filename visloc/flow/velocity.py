@@ -229,6 +229,33 @@ def _prior(last: tuple[GlobalMotion, float] | None, dt: float) -> GlobalMotion |
                    scale=motion.scale**k, center_of_rotation=None)
 
 
+def _pair_timing(dt: float | None, height: float | None, fps: float | None,
+                 default_height: float | None) -> tuple[float, float]:
+    """:meth:`EgoMotion.update`'s ``dt`` (s) and height (m) of a pair, the stream's defaults
+    filled in (``1 / fps``, ``default_height``) and checked (its Raises)."""
+    if dt is None:
+        if fps is None:
+            raise ValueError("dt is required when EgoMotion has no fps")
+        dt = 1.0 / fps
+    h = height if height is not None else default_height
+    if h is None:
+        raise ValueError("height is required when EgoMotion has no default height")
+    _positive(h, "height")
+    _positive(dt, "dt")
+    return dt, h
+
+
+def _split_options(options: dict) -> tuple[dict, str, bool, bool, bool]:
+    """:class:`EgoMotion`'s ``options`` split into those for :func:`block_flow` (a copy) and
+    its own: ``method``, ``direct``, ``track`` and ``shadows``, defaults filled in."""
+    opts = dict(options)
+    method = opts.pop("method", "similarity")
+    direct = bool(opts.pop("direct", False))
+    track = bool(opts.pop("track", True))
+    local = bool(opts.pop("shadows", False))
+    return opts, method, direct, track, local
+
+
 @dataclass
 class EgoMotion:
     """Streaming ground velocity and dead-reckoned track (report Figure 3.8, drift included).
@@ -342,21 +369,9 @@ class EgoMotion:
             self._prev = img
             self.track.append((0.0, 0.0, 0.0, 0.0))
             return None
-        if dt is None:
-            if self.fps is None:
-                raise ValueError("dt is required when EgoMotion has no fps")
-            dt = 1.0 / self.fps
-        h = height if height is not None else self.height
-        if h is None:
-            raise ValueError("height is required when EgoMotion has no default height")
-        _positive(h, "height")
-        _positive(dt, "dt")
+        dt, h = _pair_timing(dt, height, self.fps, self.height)
         a, b = check_pair(self._prev, img)
-        opts = dict(self.options)
-        method = opts.pop("method", "similarity")
-        direct = bool(opts.pop("direct", False))
-        track = bool(opts.pop("track", True))
-        local = bool(opts.pop("shadows", False))
+        opts, method, direct, track, local = _split_options(self.options)
         prior = _prior(self._last, dt)
         frames = None
         if direct:  # each frame is blurred once: as the second of one pair, the first of the next
@@ -373,6 +388,14 @@ class EgoMotion:
             self._anchor = (spread, gv.quality, 0) if good else None
         else:
             self.last_field = None
+        self._advance(gv, dt, frames, img)
+        return gv
+
+    def _advance(self, gv: GroundVelocity, dt: float, frames: tuple[NDArray[np.float32], NDArray[np.float32]] | None,
+                 img: NDArray[np.uint8]) -> None:
+        """Move the stream past a measured pair: keep its motion as the next prior (if good
+        enough) and its blurred second frame, integrate ``gv`` over ``dt`` (s) into the pose
+        and :attr:`track`, and make ``img`` the previous frame."""
         # a pair of low quality passes no prior on: the next match searches the whole range again
         self._last = (gv.motion, dt) if gv.motion is not None and gv.quality >= PRIOR_QUALITY else None
         if frames is not None:
@@ -385,7 +408,6 @@ class EgoMotion:
         self._time += dt
         self.track.append((self._time, float(self._pos[0]), float(self._pos[1]), self._yaw))
         self._prev = img
-        return gv
 
     def _tracked(self, frames: tuple[NDArray[np.float32], NDArray[np.float32]] | None, prior: GlobalMotion | None,
                  method: str, height: float, dt: float, gyro: NDArray | None) -> tuple[GroundVelocity | None, bool]:

@@ -123,6 +123,71 @@ def _corners(det: MarkerDetection, i: int) -> NDArray[np.float64]:
     return c
 
 
+def _draw_outlines(out: NDArray[np.uint8], detections: list[MarkerDetection], thickness: int) -> None:
+    """Draw each marker's outline and the dot on its corner 0 into ``out`` (BGR, in place),
+    checking the corners (4, 2) of each detection."""
+    for i, det in enumerate(detections):
+        corners = _corners(det, i)
+        cv2.polylines(out, [_fixed(corners)], True, OUTLINE_COLOR, thickness, cv2.LINE_AA, _SHIFT)
+        radius = round(max(2.0, 2.0 * thickness) * _SCALE)
+        cv2.circle(out, _pt(corners[0]), radius, CORNER0_COLOR, -1, cv2.LINE_AA, _SHIFT)
+
+
+def _draw_axes(
+    out: NDArray[np.uint8], poses: list[Any], camera: Any, marker_length: float, thickness: int
+) -> None:
+    """Draw the projected x, y, z axes (``marker_length / 2`` long, in the units of ``t``) of
+    each pose into ``out`` (BGR, in place); None poses, poses with an axis point behind the
+    camera and projections that are not finite are skipped."""
+    K, dist = _camera_matrices(camera)
+    half = 0.5 * float(marker_length)
+    axis_points = np.array([[0, 0, 0], [half, 0, 0], [0, half, 0], [0, 0, half]], float)
+    for i, pose in enumerate(poses):
+        if pose is None:
+            continue
+        R, t = _pose_arrays(pose, i)
+        if np.any((axis_points @ R.T + t)[:, 2] <= 1e-9):
+            continue
+        rvec, _ = cv2.Rodrigues(R)
+        projected, _ = cv2.projectPoints(axis_points, rvec, t, K, dist)
+        p = projected.reshape(-1, 2)
+        if not np.all(np.isfinite(p)):
+            continue
+        origin = _pt(p[0])
+        for k, color in enumerate(AXIS_COLORS):
+            cv2.line(out, origin, _pt(p[k + 1]), color, thickness + 1, cv2.LINE_AA, _SHIFT)
+
+
+def _draw_ids(
+    out: NDArray[np.uint8], detections: list[MarkerDetection], font_scale: float, thickness: int
+) -> None:
+    """Write each marker's id, white on a dark outline, centred on its ``center`` (or the mean
+    of its corners) into ``out`` (BGR, in place); markers without a finite centre get none."""
+    for det in detections:
+        text = str(int(det.id))
+        (tw, th), _ = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, font_scale, thickness)
+        center = getattr(det, "center", None)
+        if center is None:
+            center = np.asarray(det.corners, dtype=np.float64).mean(axis=0)
+        cx, cy = np.asarray(center, dtype=np.float64)
+        if not (np.isfinite(cx) and np.isfinite(cy)):
+            continue
+        org = (round(float(cx) - tw / 2), round(float(cy) + th / 2))
+        cv2.putText(
+            out,
+            text,
+            org,
+            cv2.FONT_HERSHEY_SIMPLEX,
+            font_scale,
+            (0, 0, 0),
+            thickness + 2,
+            cv2.LINE_AA,
+        )
+        cv2.putText(
+            out, text, org, cv2.FONT_HERSHEY_SIMPLEX, font_scale, TEXT_COLOR, thickness, cv2.LINE_AA
+        )
+
+
 def draw_markers(
     image: NDArray[np.uint8],
     detections: Sequence[MarkerDetection],
@@ -174,50 +239,8 @@ def draw_markers(
     h, w = out.shape[:2]
     thickness = max(1, round(min(h, w) / 400))
     font_scale = max(0.4, min(h, w) / 900)
-    for i, det in enumerate(detections):
-        corners = _corners(det, i)
-        cv2.polylines(out, [_fixed(corners)], True, OUTLINE_COLOR, thickness, cv2.LINE_AA, _SHIFT)
-        radius = round(max(2.0, 2.0 * thickness) * _SCALE)
-        cv2.circle(out, _pt(corners[0]), radius, CORNER0_COLOR, -1, cv2.LINE_AA, _SHIFT)
+    _draw_outlines(out, detections, thickness)
     if poses is not None:
-        K, dist = _camera_matrices(camera)
-        half = 0.5 * float(marker_length)  # type: ignore[arg-type]
-        axis_points = np.array([[0, 0, 0], [half, 0, 0], [0, half, 0], [0, 0, half]], float)
-        for i, pose in enumerate(poses):
-            if pose is None:
-                continue
-            R, t = _pose_arrays(pose, i)
-            if np.any((axis_points @ R.T + t)[:, 2] <= 1e-9):
-                continue
-            rvec, _ = cv2.Rodrigues(R)
-            projected, _ = cv2.projectPoints(axis_points, rvec, t, K, dist)
-            p = projected.reshape(-1, 2)
-            if not np.all(np.isfinite(p)):
-                continue
-            origin = _pt(p[0])
-            for k, color in enumerate(AXIS_COLORS):
-                cv2.line(out, origin, _pt(p[k + 1]), color, thickness + 1, cv2.LINE_AA, _SHIFT)
-    for det in detections:
-        text = str(int(det.id))
-        (tw, th), _ = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, font_scale, thickness)
-        center = getattr(det, "center", None)
-        if center is None:
-            center = np.asarray(det.corners, dtype=np.float64).mean(axis=0)
-        cx, cy = np.asarray(center, dtype=np.float64)
-        if not (np.isfinite(cx) and np.isfinite(cy)):
-            continue
-        org = (round(float(cx) - tw / 2), round(float(cy) + th / 2))
-        cv2.putText(
-            out,
-            text,
-            org,
-            cv2.FONT_HERSHEY_SIMPLEX,
-            font_scale,
-            (0, 0, 0),
-            thickness + 2,
-            cv2.LINE_AA,
-        )
-        cv2.putText(
-            out, text, org, cv2.FONT_HERSHEY_SIMPLEX, font_scale, TEXT_COLOR, thickness, cv2.LINE_AA
-        )
+        _draw_axes(out, poses, camera, marker_length, thickness)  # type: ignore[arg-type]
+    _draw_ids(out, detections, font_scale, thickness)
     return out

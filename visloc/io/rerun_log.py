@@ -64,6 +64,46 @@ def _rgb(image: object) -> NDArray[np.uint8]:
     return img
 
 
+def _check_poses(poses: list[Any] | None, n_detections: int, marker_length: float | None) -> None:
+    """Raise a ValueError unless ``poses`` (when given) has one entry per detection and comes
+    with a positive, finite ``marker_length`` (m)."""
+    if poses is None:
+        return
+    if len(poses) != n_detections:
+        raise ValueError(
+            f"poses must have one entry (or None) per detection: "
+            f"got {len(poses)} poses for {n_detections} detections"
+        )
+    if marker_length is None or not math.isfinite(marker_length) or marker_length <= 0:
+        raise ValueError(
+            f"marker_length must be a positive length when poses are given, "
+            f"got {marker_length!r}"
+        )
+
+
+def _image_archetype(rgb: NDArray[np.uint8] | None, jpeg_quality: int | None):
+    """What ``camera/image`` is logged as: the RGB or grey image (JPEG-compressed with
+    ``jpeg_quality``, 1-100, when given), or a non-recursive clear when ``rgb`` is None."""
+    if rgb is None:
+        return _rerun().Clear(recursive=False)
+    img = _rerun().Image(rgb)
+    return img if jpeg_quality is None else img.compress(jpeg_quality=int(jpeg_quality))
+
+
+def _log_outlines(rec, ids: list[int], corners: list[NDArray[np.float64]]) -> None:
+    """Log the markers' closed outlines (labelled with their ids) and their corner 0 points to
+    the recording stream ``rec``; corners (4, 2) px, shifted to rerun's pixel centres."""
+    strips = [np.vstack([c, c[:1]]) + _HALF_PIXEL for c in corners]
+    rec.log(
+        "camera/image/markers",
+        _rerun().LineStrips2D(strips, labels=[str(i) for i in ids], class_ids=ids),
+    )
+    rec.log(
+        "camera/image/corner0",
+        _rerun().Points2D([c[0] + _HALF_PIXEL for c in corners], colors=_CORNER0_RGB, radii=-3.0),
+    )
+
+
 class RerunLogger(Closing):
     """Write a rerun recording (``.rrd`` file) of frames, marker detections and poses.
 
@@ -176,46 +216,19 @@ class RerunLogger(Closing):
         detections = list(detections)
         corners = [self._corners(d, i) for i, d in enumerate(detections)]
         poses = None if poses is None else list(poses)
-        if poses is not None:
-            if len(poses) != len(detections):
-                raise ValueError(
-                    f"poses must have one entry (or None) per detection: "
-                    f"got {len(poses)} poses for {len(detections)} detections"
-                )
-            if marker_length is None or not math.isfinite(marker_length) or marker_length <= 0:
-                raise ValueError(
-                    f"marker_length must be a positive length when poses are given, "
-                    f"got {marker_length!r}"
-                )
+        _check_poses(poses, len(detections), marker_length)
         rgb = None if image is None else _rgb(image)
         K = None if camera is None else self._camera_K(camera)
 
         rec = self.recording
         rec.set_time("frame", sequence=int(index))
         rec.set_time("time", duration=float(time))
-        if rgb is None:
-            rec.log("camera/image", _rerun().Clear(recursive=False))
-        else:
-            img = _rerun().Image(rgb)
-            rec.log(
-                "camera/image",
-                img
-                if self.jpeg_quality is None
-                else img.compress(jpeg_quality=int(self.jpeg_quality)),
-            )
-            if K is not None:
-                self._log_pinhole(K, (rgb.shape[1], rgb.shape[0]))
+        rec.log("camera/image", _image_archetype(rgb, self.jpeg_quality))
+        if rgb is not None and K is not None:
+            self._log_pinhole(K, (rgb.shape[1], rgb.shape[0]))
 
         ids = [int(d.id) for d in detections]
-        strips = [np.vstack([c, c[:1]]) + _HALF_PIXEL for c in corners]
-        rec.log(
-            "camera/image/markers",
-            _rerun().LineStrips2D(strips, labels=[str(i) for i in ids], class_ids=ids),
-        )
-        rec.log(
-            "camera/image/corner0",
-            _rerun().Points2D([c[0] + _HALF_PIXEL for c in corners], colors=_CORNER0_RGB, radii=-3.0),
-        )
+        _log_outlines(rec, ids, corners)
         self._log_poses(ids, poses, marker_length)
 
     def _check_frame(self, index: int, time: float) -> None:

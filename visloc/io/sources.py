@@ -455,6 +455,22 @@ def _image_list(spec: str, paths: list[str], kind: str, fps: float | None) -> Im
     return ImageListSource(images, fps=fps, description=f"{kind} {spec} ({len(images)} {noun})")
 
 
+def _open_file(path: str, fps: float | None) -> FrameSource:
+    """An existing file as a source: a single image (by its extension), else a video; a file
+    with another extension that is no readable video is a :class:`SourceError` naming it."""
+    if _is_image_path(path):
+        return ImageListSource([path], fps=fps, description=f"image {path}")
+    ext = os.path.splitext(path)[1].lower()
+    try:
+        return VideoSource(path, fps=fps)
+    except SourceError:
+        if ext in VIDEO_EXTENSIONS:
+            raise
+        raise SourceError(
+            f"cannot open {path}: not an image or a readable video (extension {ext or 'none'})"
+        ) from None
+
+
 def open_source(spec: str | int | os.PathLike[str], *, fps: float | None = None,
                 topic: str | None = None) -> FrameSource:
     """Open a frame source from a path, glob pattern, video file, recording or camera index.
@@ -525,17 +541,7 @@ def open_source(spec: str | int | os.PathLike[str], *, fps: float | None = None,
         names = [os.path.join(text, n) for n in os.listdir(text)]
         return _image_list(text, names, "folder", fps)
     if os.path.isfile(text):
-        if _is_image_path(text):
-            return ImageListSource([text], fps=fps, description=f"image {text}")
-        ext = os.path.splitext(text)[1].lower()
-        try:
-            return VideoSource(text, fps=fps)
-        except SourceError:
-            if ext in VIDEO_EXTENSIONS:
-                raise
-            raise SourceError(
-                f"cannot open {text}: not an image or a readable video (extension {ext or 'none'})"
-            ) from None
+        return _open_file(text, fps)
     if _GLOB_CHARS & set(text):
         return _image_list(text, glob.glob(text, recursive=True), "glob", fps)
     if os.path.exists(text):  # a device, a pipe, a socket

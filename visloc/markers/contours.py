@@ -288,11 +288,27 @@ def filter_candidates(
     h, w = image_shape[:2]
     lo, hi = perimeter_bounds(image_shape, params=params)
     if use_compiled(native, _filter, "visloc.markers._filter") and contours:
-        flat = [np.asarray(c).reshape(-1, 2) for c in contours]
-        pts = np.ascontiguousarray(np.concatenate(flat), np.int32)
-        offsets = np.concatenate([[0], np.cumsum([len(c) for c in flat])]).astype(np.int64)
-        kept, quads = _packed_filter(pts, offsets, image_shape, lo, hi, params)
-        return [(flat[i], quads[j]) for j, i in enumerate(kept)]
+        return _compiled_candidates(contours, image_shape, lo, hi, params)
+    return _opencv_candidates(contours, (h, w), lo, hi, params)
+
+
+def _compiled_candidates(contours: list[NDArray[np.int32]], image_shape: tuple[int, ...], lo: int, hi: int,
+                         params: CandidateFilter) -> list[tuple[NDArray[np.int32], NDArray[np.int32]]]:
+    """:func:`filter_candidates` by the compiled filter: the (non-empty) ``contours`` packed,
+    filtered with ``lo`` to ``hi`` points, each kept one as (N, 2) with its quad (4, 2)."""
+    flat = [np.asarray(c).reshape(-1, 2) for c in contours]
+    pts = np.ascontiguousarray(np.concatenate(flat), np.int32)
+    offsets = np.concatenate([[0], np.cumsum([len(c) for c in flat])]).astype(np.int64)
+    kept, quads = _packed_filter(pts, offsets, image_shape, lo, hi, params)
+    return [(flat[i], quads[j]) for j, i in enumerate(kept)]
+
+
+def _opencv_candidates(contours: list[NDArray[np.int32]], shape: tuple[int, int], lo: int, hi: int,
+                       params: CandidateFilter) -> list[tuple[NDArray[np.int32], NDArray[np.int32]]]:
+    """:func:`filter_candidates` by OpenCV calls: the ``contours`` with ``lo`` to ``hi``
+    points that pass every test in an image of ``shape`` (H, W), px, each as (N, 2) with
+    its quad (4, 2)."""
+    h, w = shape
     lengths = np.array(list(map(len, contours)), np.int64)
     keep = np.flatnonzero((lengths >= lo) & (lengths <= hi))
     bd = params.border_distance

@@ -77,6 +77,59 @@ def _matrix(value: ArrayLike, name: str, n: int) -> FloatArray:
     return arr
 
 
+def _pwm(pwm: ArrayLike) -> FloatArray:
+    """``pwm`` as a float array (N,), N >= 2, of finite commands > 0 %; else TypeError/ValueError."""
+    try:
+        p = np.asarray(pwm, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"pwm: expected real numbers, got {type(pwm).__name__}") from exc
+    if p.ndim != 1 or p.size < 2:
+        raise ValueError(f"pwm: expected shape (N,) with N >= 2, got {p.shape}")
+    if not np.all(np.isfinite(p)) or np.any(p <= 0):
+        raise ValueError("pwm: expected finite commands > 0 % (the model holds for pwm > 0)")
+    return p
+
+
+def _weights(weights: ArrayLike | None, n: int) -> FloatArray:
+    """The weights (n,) of the normal equations (E.8): ``weights`` checked (finite, >= 0), or
+    the report's :data:`REPORT_WEIGHTS` (E.12) when None (then n must be 10)."""
+    if weights is None:
+        if n != REPORT_WEIGHTS.size:
+            raise ValueError(
+                f"weights: the report's default (E.12) has {REPORT_WEIGHTS.size} entries for "
+                f"pwm 10, 20, ..., 100 %; got N = {n} commands, pass weights explicitly"
+            )
+        return REPORT_WEIGHTS
+    w = np.asarray(weights, dtype=float)
+    if w.shape != (n,):
+        raise ValueError(f"weights: expected shape ({n},), got {w.shape}")
+    if not np.all(np.isfinite(w)) or np.any(w < 0):
+        raise ValueError("weights: expected finite values >= 0")
+    return w
+
+
+def _system(
+    p: FloatArray, t: FloatArray, q: FloatArray, w: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray, np.ndarray]:
+    """The linear system of eqs. (E.9)-(E.11) over the finite samples of thrust ``t`` (M, N)
+    and torque ``q`` (J, N): ``A`` (S, M + J + 1), ``b`` (S,) in pwm percent, the samples'
+    weights (S,) and a boolean mask (S,) of the thrust rows."""
+    m = t.shape[0]
+    cols = m + q.shape[0] + 1
+    rows_a, rows_b, rows_w, is_thrust = [], [], [], []
+    for block, offset in ((t, 0), (q, m)):
+        for i, series in enumerate(block):
+            ok = np.isfinite(series)
+            row = np.zeros((int(ok.sum()), cols))
+            row[:, offset + i] = np.sqrt(series[ok])  # report eq. (E.9): sqrt(T) or sqrt(tau)
+            row[:, -1] = -1.0  # report eq. (E.9): last column -1 for k
+            rows_a.append(row)
+            rows_b.append(p[ok])  # report eq. (E.11)
+            rows_w.append(w[ok])
+            is_thrust.append(np.full(row.shape[0], offset == 0))
+    return np.vstack(rows_a), np.concatenate(rows_b), np.concatenate(rows_w), np.concatenate(is_thrust)
+
+
 def fit_propulsion(
     pwm: ArrayLike,
     thrust: ArrayLike,
@@ -112,50 +165,17 @@ def fit_propulsion(
     TypeError
         ``pwm``, ``thrust`` or ``torque`` not real numbers.
     """
-    try:
-        p = np.asarray(pwm, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"pwm: expected real numbers, got {type(pwm).__name__}") from exc
-    if p.ndim != 1 or p.size < 2:
-        raise ValueError(f"pwm: expected shape (N,) with N >= 2, got {p.shape}")
-    if not np.all(np.isfinite(p)) or np.any(p <= 0):
-        raise ValueError("pwm: expected finite commands > 0 % (the model holds for pwm > 0)")
+    p = _pwm(pwm)
     n = p.size
     t = _matrix(thrust, "thrust", n)
     if not len(t):
         raise ValueError(f"thrust: expected at least one motor's measurements, got shape {t.shape}")
     q = np.empty((0, n)) if torque is None else _matrix(torque, "torque", n)
-    if weights is None:
-        if n != REPORT_WEIGHTS.size:
-            raise ValueError(
-                f"weights: the report's default (E.12) has {REPORT_WEIGHTS.size} entries for "
-                f"pwm 10, 20, ..., 100 %; got N = {n} commands, pass weights explicitly"
-            )
-        w = REPORT_WEIGHTS
-    else:
-        w = np.asarray(weights, dtype=float)
-        if w.shape != (n,):
-            raise ValueError(f"weights: expected shape ({n},), got {w.shape}")
-        if not np.all(np.isfinite(w)) or np.any(w < 0):
-            raise ValueError("weights: expected finite values >= 0")
+    w = _weights(weights, n)
 
     m, j = t.shape[0], q.shape[0]
     cols = m + j + 1
-    rows_a, rows_b, rows_w, is_thrust = [], [], [], []
-    for block, offset in ((t, 0), (q, m)):
-        for i, series in enumerate(block):
-            ok = np.isfinite(series)
-            row = np.zeros((int(ok.sum()), cols))
-            row[:, offset + i] = np.sqrt(series[ok])  # report eq. (E.9): sqrt(T) or sqrt(tau)
-            row[:, -1] = -1.0  # report eq. (E.9): last column -1 for k
-            rows_a.append(row)
-            rows_b.append(p[ok])  # report eq. (E.11)
-            rows_w.append(w[ok])
-            is_thrust.append(np.full(row.shape[0], offset == 0))
-    a_mat = np.vstack(rows_a)
-    b_vec = np.concatenate(rows_b)
-    w_vec = np.concatenate(rows_w)
-    thrust_rows = np.concatenate(is_thrust)
+    a_mat, b_vec, w_vec, thrust_rows = _system(p, t, q, w)
     sw = np.sqrt(w_vec)
     # report eq. (E.8): x = (A^T W A)^-1 A^T W b, solved as lstsq(sqrt(W) A, sqrt(W) b)
     x, _, rank, _ = np.linalg.lstsq(a_mat * sw[:, None], b_vec * sw, rcond=None)

@@ -299,6 +299,31 @@ def levenberg_marquardt(
             float(f[0, 0]), float(f[1, 0]), int(max_iter), RTOL, RTOL_OTHER, MAX_ITER_OTHER, ATOL)
         return (np.frombuffer(raw_x, np.float64).reshape(S, 6).copy(), np.frombuffer(raw_cost, np.float64).copy(),
                 np.frombuffer(raw_M, np.float64).reshape(S, 7, 7).copy())
+    return _lm_numpy(x, X, xy, f, max_iter)
+
+
+def _damped_steps(M: FloatArray, lam: list[float], active: list[bool]) -> tuple[FloatArray, FloatArray]:
+    """Marquardt's steps ``dx`` (S, 6, 1), solving ``(J^T J + lam diag(J^T J)) dx = J^T r``
+    for every start from ``M = E^T E`` (S, 7, 7) and its damping ``lam`` (the new start is
+    ``x - dx``), and ``J^T r`` (S, 6, 1); both zero for the starts no longer ``active``."""
+    A = M[:, :6, :6]
+    g = M[:, :6, 6:]  # J^T r
+    damped = A + (A * _EYE6) * np.array(lam)[:, None, None]
+    if not all(active):  # stopped starts (maybe behind the camera) take no step
+        g = np.where(np.array(active)[:, None, None], g, 0.0)
+        damped[[not a for a in active]] = _EYE6
+    try:
+        step = np.linalg.solve(damped, g)
+    except np.linalg.LinAlgError:
+        step = np.linalg.pinv(damped) @ g
+    return step, g
+
+
+def _lm_numpy(x: FloatArray, X: FloatArray, xy: FloatArray, f: FloatArray,
+              max_iter: int) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """:func:`levenberg_marquardt` in numpy: the starts ``x`` (S, 6), refined in place, and
+    their sums of squared residuals (S,), px^2, and ``E^T E`` (S, 7, 7) at the result."""
+    S = len(x)
     E = residuals_and_jacobian(x, X, xy, f)
     M = E.mT @ E
     # bookkeeping in Python scalars: S is a handful
@@ -306,16 +331,7 @@ def levenberg_marquardt(
     lam = [1e-3] * S
     active = [math.isfinite(c) for c in cost]
     for it in range(max_iter):
-        A = M[:, :6, :6]
-        g = M[:, :6, 6:]  # J^T r
-        damped = A + (A * _EYE6) * np.array(lam)[:, None, None]
-        if not all(active):  # stopped starts (maybe behind the camera) take no step
-            g = np.where(np.array(active)[:, None, None], g, 0.0)
-            damped[[not a for a in active]] = _EYE6
-        try:
-            step = np.linalg.solve(damped, g)
-        except np.linalg.LinAlgError:
-            step = np.linalg.pinv(damped) @ g
+        step, g = _damped_steps(M, lam, active)
         # d.g: a lower bound of the decrease of the squared error that the linear model
         # predicts for the step d (d.g + lam d.diag(A).d; exactly d.g when undamped)
         pred = (step * g).sum(axis=(1, 2)).tolist()

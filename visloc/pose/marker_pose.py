@@ -177,6 +177,22 @@ def estimate_marker_pose(
     xyT = xy.T.copy()
     f = np.array([[camera.fx], [camera.fy]])
 
+    starts, with_yaw = _starts(xy, L, c, start)
+    # report §3.2.2 / App. G: Gauss-Newton on the reprojection error over [x y z phi theta psi]
+    params, sse, M = levenberg_marquardt(np.array(starts), X, xyT, f, max_iter=max_iter)
+    if start == "auto" and not with_yaw and not np.isfinite(sse).any():
+        # the planar solutions ended behind the camera: fall back on the report's yaw guess
+        params, sse, M = levenberg_marquardt(_yaw_start(xy, L, c)[None], X, xyT, f, max_iter=max_iter)
+    if not np.isfinite(sse).any():
+        raise ValueError(f"no pose puts all corners in front of the camera: {c.tolist()}")
+    params, M = _on_pose_branch(params, M, X, xyT, f)
+    return _best_poses(params, sse, M, pixel_sigma)
+
+
+def _starts(xy: FloatArray, L: float, c: FloatArray, start: str) -> tuple[list[list[float]], bool]:
+    """:func:`estimate_marker_pose`'s starting parameter vectors ``[x y z phi theta psi]`` for
+    its ``start`` from the normalized corners ``xy`` (4, 2) of a marker of side ``L`` (m),
+    and whether the yaw guess is among them (``c``: the pixel corners, for the errors)."""
     starts = []
     if start != "yaw":
         try:
@@ -188,20 +204,26 @@ def estimate_marker_pose(
     with_yaw = start in ("yaw", "all") or (start == "auto" and not starts)
     if with_yaw:
         starts.append(_yaw_start(xy, L, c))  # report App. G: best of four yaw guesses
-    # report §3.2.2 / App. G: Gauss-Newton on the reprojection error over [x y z phi theta psi]
-    params, sse, M = levenberg_marquardt(np.array(starts), X, xyT, f, max_iter=max_iter)
-    if start == "auto" and not with_yaw and not np.isfinite(sse).any():
-        # the planar solutions ended behind the camera: fall back on the report's yaw guess
-        params, sse, M = levenberg_marquardt(_yaw_start(xy, L, c)[None], X, xyT, f, max_iter=max_iter)
-    if not np.isfinite(sse).any():
-        raise ValueError(f"no pose puts all corners in front of the camera: {c.tolist()}")
+    return starts, with_yaw
 
+
+def _on_pose_branch(params: FloatArray, M: FloatArray, X: FloatArray, xyT: FloatArray,
+                    f: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The refined ``params`` (S, 6), their angles moved (in place) onto the branch of
+    ``Pose.params``, and ``M`` (S, 7, 7) re-evaluated there when any moved (``X``, ``xyT``
+    and ``f`` as for :func:`levenberg_marquardt`)."""
     # Pose.params uses the branch theta in [-pi/2, pi/2]; the covariance must match it
     if (np.cos(params[:, 4]) < 0.0).any():
         params[:, 3:] = matrix_to_euler(rotations_and_rates(params)[0])
         _, _, M = levenberg_marquardt(params, X, xyT, f, max_iter=0)
-    R = rotations_and_rates(params)[0]
+    return params, M
 
+
+def _best_poses(params: FloatArray, sse: FloatArray, M: FloatArray, pixel_sigma: float | None) -> Pose:
+    """The refined solution of least ``sse`` as a :class:`Pose`, with as its alternative the
+    next one whose rotation differs from it by more than :data:`SAME_POSE_RAD` (if any);
+    ``params`` (S, 6), ``sse`` (S,) px^2, ``M`` (S, 7, 7) as from :func:`levenberg_marquardt`."""
+    R = rotations_and_rates(params)[0]
     order = [int(i) for i in np.argsort(sse, kind="stable") if np.isfinite(sse[i])]
     chosen = order[:1]
     for i in order[1:]:

@@ -20,6 +20,8 @@ model; the ground truth is one :class:`~visloc.synth.markers.RenderedMarker` per
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
@@ -197,6 +199,28 @@ def render_aprilgrid(
     """
     k = check_camera(K)
     w, h = check_size(size)
+    pose = _check_board_pose(pose)
+    grid = _check_grid(rows, cols, tag_length, spacing_ratio, dictionary, first_id)
+    deg, gen = _check_degradations(camera, rng, blur_sigma=blur_sigma, motion_blur=motion_blur,
+                                   motion_angle=motion_angle, noise_sigma=noise_sigma, gain=gain,
+                                   gradient=gradient, jpeg_quality=jpeg_quality)
+    return _render_aprilgrid(k, (w, h), pose, grid, background, camera, gen, deg)
+
+
+class _Grid(NamedTuple):
+    """The AprilGrid arguments of :func:`render_aprilgrid`, checked."""
+
+    rows: int
+    cols: int
+    tag_length: float
+    spacing_ratio: float
+    dictionary: Dictionary
+    first_id: int
+
+
+def _check_board_pose(pose: object) -> Pose:
+    """``pose`` checked to be a Pose of a finite rotation and a finite translation, as a Pose of
+    float arrays."""
     if not isinstance(pose, Pose):
         raise TypeError(f"pose must be a visloc.types.Pose, got {type(pose).__name__}")
     R, t = np.asarray(pose.R, float), np.asarray(pose.t, float)
@@ -206,7 +230,13 @@ def render_aprilgrid(
         R.T @ R, np.eye(3), atol=1e-6
     ) or np.linalg.det(R) < 0:
         raise ValueError("pose.R must be a finite rotation matrix and pose.t finite")
-    pose = Pose(R, t)
+    return Pose(R, t)
+
+
+def _check_grid(rows: object, cols: object, tag_length: object, spacing_ratio: object,
+                dictionary: str | Dictionary, first_id: object) -> _Grid:
+    """The grid arguments of :func:`render_aprilgrid` checked, the dictionary loaded; it must
+    hold the ``rows * cols`` ids from ``first_id`` on."""
     rows = check_int(rows, "rows", low=1, high=1000)
     cols = check_int(cols, "cols", low=1, high=1000)
     L = check_number(tag_length, "tag_length", low=0.0, low_open=True)
@@ -217,17 +247,24 @@ def render_aprilgrid(
     if n > len(dic):
         raise ValueError(f"rows * cols must be at most {len(dic)} ({dic.name}), got {n}")
     first_id = check_int(first_id, "first_id", low=0, high=len(dic) - n)
-    deg, gen = _check_degradations(camera, rng, blur_sigma=blur_sigma, motion_blur=motion_blur,
-                                   motion_angle=motion_angle, noise_sigma=noise_sigma, gain=gain,
-                                   gradient=gradient, jpeg_quality=jpeg_quality)
+    return _Grid(rows, cols, L, spacing_ratio, dic, first_id)
 
+
+def _render_aprilgrid(k: FloatArray, size: tuple[int, int], pose: Pose, grid: _Grid,
+                      background: str | NDArray[np.uint8] | None, camera: CameraEffects | None,
+                      gen: np.random.Generator, deg: dict) -> MarkerRender:
+    """:func:`render_aprilgrid` from its checked arguments: the tags' ground truth, the board
+    drawn on the ideal canvas (if it faces the camera), and the frame finished with the
+    degradations ``deg`` or the ``camera`` model."""
+    rows, cols, L, spacing_ratio, dic, first_id = grid
+    R, t = pose.R, pose.t
     s = spacing_ratio * L
-    ids = list(range(first_id, first_id + n))
-    canvas, bg_name, k_ideal = _ideal_background(k, (w, h), background, camera, gen)
-    markers = _marker_truths(k, (w, h), camera, [  # tag frame: the board's axes at the tag's centre
+    ids = list(range(first_id, first_id + rows * cols))
+    canvas, bg_name, k_ideal = _ideal_background(k, size, background, camera, gen)
+    tags = aprilgrid_tag_corners(rows, cols, L, spacing_ratio=spacing_ratio)
+    markers = _marker_truths(k, size, camera, [  # tag frame: the board's axes at the tag's centre
         (marker_id, Pose(R, R @ corners.mean(axis=0) + t), L)
-        for marker_id, corners in zip(ids, aprilgrid_tag_corners(rows, cols, L, spacing_ratio=spacing_ratio),
-                                      strict=True)
+        for marker_id, corners in zip(ids, tags, strict=True)
     ])
     if faces_camera(pose):
         outer, polys, weights = _board_polygons(dic, ids, rows, cols, L, s)
@@ -242,7 +279,7 @@ def render_aprilgrid(
         "board_rvec": [float(v) for v in pose.rvec],
         "board_tvec": [float(v) for v in t],
     }
-    return _finish(canvas, k, k_ideal, (w, h), markers, dic.name, params, camera, gen, **deg)
+    return _finish(canvas, k, k_ideal, size, markers, dic.name, params, camera, gen, **deg)
 
 
 def _board_extent(rows: int, cols: int, L: float, s: float) -> FloatArray:

@@ -30,7 +30,7 @@ from numpy.typing import ArrayLike, NDArray
 from visloc._checks import check_int
 from visloc.markers.response import srgb_to_linear
 from visloc.synth._checks import check_camera, check_number, check_rng, check_size
-from visloc.synth.textures import motion_kernel
+from visloc.synth.textures import _blur, _jpeg_round_trip
 
 FloatArray = NDArray[np.float64]
 
@@ -374,6 +374,41 @@ def apply_camera(
         On a malformed argument (the message names it), or distortion coefficients that fold
         the frame (not invertible out to its corners).
     """
+    img = _check_linear(linear)
+    k = check_camera(K)
+    k_ideal = k if ideal_K is None else check_camera(ideal_K)
+    if not isinstance(effects, CameraEffects):
+        raise TypeError(f"effects must be a CameraEffects, got {type(effects).__name__}")
+    gen = check_rng(rng)
+    w, h = (img.shape[1], img.shape[0]) if size is None else check_size(size)
+    e = effects
+
+    # 1. lens distortion: output pixel p_d samples the ideal image at p_u, distort(p_u) = p_d
+    img = _distort_image(img, k, k_ideal, e.k1, e.k2, (w, h))
+    # 2. optics and motion blur (symmetric kernels: no edge moves)
+    img = _blur(img, e.blur_sigma, e.motion_blur, e.motion_angle)
+    signal = img.astype(np.float64)
+    # 3. vignetting, 4. exposure
+    if e.vignetting > 0:
+        signal *= _vignette(tuple(k.ravel()), (w, h), e.vignetting)
+    if e.exposure != 1.0:
+        signal *= e.exposure
+    np.maximum(signal, 0.0, out=signal)
+    # 5. shot noise (Poisson, as a Gaussian of variance 255 s / full_well) and read noise
+    _add_sensor_noise(signal, e.full_well, e.read_noise, gen)
+    v = np.clip(signal / 255.0, 0.0, 1.0)
+    # 6. transfer curve, quantisation, compression
+    if e.srgb:
+        v = srgb_encode(v)
+    out = np.rint(v * 255.0).astype(np.uint8)
+    if e.jpeg_quality is not None:
+        out = _jpeg_round_trip(out, e.jpeg_quality)
+    return out, e.to_dict()
+
+
+def _check_linear(linear: ArrayLike) -> NDArray[np.float32]:
+    """:func:`apply_camera`'s ``linear`` as a float32 (H, W) array, checked (finite, >= -1e-3)
+    and its small negative rounding errors set to 0."""
     try:
         img = np.asarray(linear, dtype=np.float32)
     except (TypeError, ValueError) as exc:
@@ -384,54 +419,36 @@ def apply_camera(
         raise ValueError(f"linear must have shape (H, W), got {img.shape}")
     if not np.all(np.isfinite(img)) or img.min() < -1e-3:
         raise ValueError(f"linear must be finite and >= 0, got values down to {img.min()}")
-    img = np.maximum(img, 0.0)
-    k = check_camera(K)
-    k_ideal = k if ideal_K is None else check_camera(ideal_K)
-    if not isinstance(effects, CameraEffects):
-        raise TypeError(f"effects must be a CameraEffects, got {type(effects).__name__}")
-    gen = check_rng(rng)
-    w, h = (img.shape[1], img.shape[0]) if size is None else check_size(size)
-    e = effects
+    return np.maximum(img, 0.0)
 
-    # 1. lens distortion: output pixel p_d samples the ideal image at p_u, distort(p_u) = p_d
+
+def _distort_image(img: NDArray[np.float32], k: FloatArray, k_ideal: FloatArray, k1: float,
+                   k2: float, size: tuple[int, int]) -> NDArray[np.float32]:
+    """The ``size`` (width, height) frame of camera ``k`` with distortion ``k1``, ``k2``
+    resampled bilinearly from the ideal image ``img`` of pinhole matrix ``k_ideal`` (border
+    reflected); ``img`` itself when that is the identity."""
+    w, h = size
     same_grid = (w, h) == (img.shape[1], img.shape[0]) and np.array_equal(k_ideal, k)
-    if e.k1 != 0.0 or e.k2 != 0.0 or not same_grid:
-        if e.k1 == 0.0 and e.k2 == 0.0:
-            v, u = np.mgrid[0:h, 0:w].astype(np.float64)
-            yu = (v - k[1, 2]) / k[1, 1]
-            xu = (u - k[0, 2] - k[0, 1] * yu) / k[0, 0]
-        else:
-            xu, yu = _undistorted_grid(tuple(k.ravel()), e.k1, e.k2, (w, h))
-        map_x = (k_ideal[0, 0] * xu + k_ideal[0, 1] * yu + k_ideal[0, 2]).astype(np.float32)
-        map_y = (k_ideal[1, 1] * yu + k_ideal[1, 2]).astype(np.float32)
-        img = cv2.remap(img, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
-    # 2. optics and motion blur (symmetric kernels: no edge moves)
-    if e.blur_sigma > 0:
-        img = cv2.GaussianBlur(img, (0, 0), e.blur_sigma, borderType=cv2.BORDER_REFLECT)
-    if e.motion_blur > 0:
-        img = cv2.filter2D(img, -1, motion_kernel(e.motion_blur, e.motion_angle),
-                           borderType=cv2.BORDER_REFLECT)
-    signal = img.astype(np.float64)
-    # 3. vignetting, 4. exposure
-    if e.vignetting > 0:
-        signal *= _vignette(tuple(k.ravel()), (w, h), e.vignetting)
-    if e.exposure != 1.0:
-        signal *= e.exposure
-    np.maximum(signal, 0.0, out=signal)
-    # 5. shot noise (Poisson, as a Gaussian of variance 255 s / full_well) and read noise
-    var = np.full_like(signal, e.read_noise**2)
-    if e.full_well is not None:
-        var += np.minimum(signal, 255.0) * (255.0 / e.full_well)
-    if e.full_well is not None or e.read_noise > 0:
+    if k1 == 0.0 and k2 == 0.0 and same_grid:
+        return img
+    if k1 == 0.0 and k2 == 0.0:
+        v, u = np.mgrid[0:h, 0:w].astype(np.float64)
+        yu = (v - k[1, 2]) / k[1, 1]
+        xu = (u - k[0, 2] - k[0, 1] * yu) / k[0, 0]
+    else:
+        xu, yu = _undistorted_grid(tuple(k.ravel()), k1, k2, (w, h))
+    map_x = (k_ideal[0, 0] * xu + k_ideal[0, 1] * yu + k_ideal[0, 2]).astype(np.float32)
+    map_y = (k_ideal[1, 1] * yu + k_ideal[1, 2]).astype(np.float32)
+    return cv2.remap(img, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+
+
+def _add_sensor_noise(signal: FloatArray, full_well: float | None, read_noise: float,
+                      gen: np.random.Generator) -> None:
+    """Add shot noise (a Gaussian of variance ``255 s / full_well`` at signal ``s``, the
+    signal taken up to 255; none if ``full_well`` is None) and read noise (std ``read_noise``)
+    to ``signal`` (grey levels) in place; no draw from ``gen`` when both are off."""
+    var = np.full_like(signal, read_noise**2)
+    if full_well is not None:
+        var += np.minimum(signal, 255.0) * (255.0 / full_well)
+    if full_well is not None or read_noise > 0:
         signal += np.sqrt(var) * gen.standard_normal(signal.shape)
-    v = np.clip(signal / 255.0, 0.0, 1.0)
-    # 6. transfer curve, quantisation, compression
-    if e.srgb:
-        v = srgb_encode(v)
-    out = np.rint(v * 255.0).astype(np.uint8)
-    if e.jpeg_quality is not None:
-        ok, buf = cv2.imencode(".jpg", out, [cv2.IMWRITE_JPEG_QUALITY, int(e.jpeg_quality)])
-        if not ok:  # pragma: no cover - OpenCV always encodes a valid grey image
-            raise RuntimeError("JPEG encoding failed")
-        out = cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE)
-    return out, e.to_dict()

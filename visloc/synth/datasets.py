@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 from collections.abc import Callable
 from pathlib import Path
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -31,6 +32,8 @@ FloatArray = NDArray[np.float64]
 #: Lens distortion ``(k1, k2)`` of the camera-like frames of :func:`render_dataset` (a webcam's
 #: mild barrel distortion, :class:`~visloc.synth.camera.CameraEffects`' default).
 DATASET_LENS = (-0.05, 0.0)
+# Distance (m) between neighbouring markers along the row of :func:`render_video`.
+_VIDEO_SPACING = 0.5
 
 
 def write_camera_yml(path: str | Path, K: FloatArray, size: tuple[int, int],
@@ -179,20 +182,35 @@ def render_dataset(
     gt["camera_like"] = bool(camera)
     try:
         for i in range(n):
-            render = random_scene(np.random.default_rng([seed, i]), size=(w, h), dictionary=dic,
-                                  difficulty=difficulty, camera=camera, lens=DATASET_LENS if camera else None)
-            name = f"frame_{i:04d}.png"
-            if not cv2.imwrite(str(out / name), render.image):
-                raise OSError(f"could not write {out / name}")
-            frames.append(_frame_record(name, render))
+            frames.append(_write_frame(out, i, seed, (w, h), dic, difficulty, camera))
             if progress is not None:
                 progress(i)
     finally:  # interrupted or failed: the frames written so far keep their ground truth
         if frames:
-            gt["frames"] = frames
-            (out / "ground_truth.json").write_text(json.dumps(gt, indent=1))
-            write_camera_yml(out / "camera.yml", K, (w, h), dist)
+            _write_ground_truth(out, gt, frames, K, (w, h), dist)
     return out
+
+
+def _write_frame(out: Path, i: int, seed: int, size: tuple[int, int], dic: Dictionary,
+                 difficulty: str, camera: bool) -> dict:
+    """Render frame ``i`` of a :func:`render_dataset` data set, write it to ``out`` as
+    ``frame_<i>.png`` and return its ground-truth record."""
+    lens = DATASET_LENS if camera else None
+    render = random_scene(np.random.default_rng([seed, i]), size=size, dictionary=dic,
+                          difficulty=difficulty, camera=camera, lens=lens)
+    name = f"frame_{i:04d}.png"
+    if not cv2.imwrite(str(out / name), render.image):
+        raise OSError(f"could not write {out / name}")
+    return _frame_record(name, render)
+
+
+def _write_ground_truth(out: Path, gt: dict, frames: list[dict], K: FloatArray,
+                        size: tuple[int, int], dist: FloatArray) -> None:
+    """Write ``ground_truth.json`` (``gt`` with the ``frames`` records) and ``camera.yml`` of a
+    :func:`render_dataset` data set to ``out``."""
+    gt["frames"] = frames
+    (out / "ground_truth.json").write_text(json.dumps(gt, indent=1))
+    write_camera_yml(out / "camera.yml", K, size, dist)
 
 
 def _ground_background(K: FloatArray, T_cam_world: Pose, size: tuple[int, int],
@@ -264,27 +282,13 @@ def render_video(
     OSError
         If the video cannot be opened for writing.
     """
-    n = check_int(n, "n", low=2)
-    seed = check_int(seed, "seed", low=0)
-    w, h = check_size(size)
-    dic = load_dictionary(dictionary)
-    n_markers = check_int(n_markers, "n_markers", low=1, high=len(dic))
-    fps = check_number(fps, "fps", low=0.0, low_open=True)
-    _check_progress(progress)
+    n, seed, (w, h), dic, n_markers, fps = _check_video_args(n, seed, size, dictionary,
+                                                              n_markers, fps, progress)
     path = Path(path)
     gt_path = Path(ground_truth) if ground_truth is not None else path.parent / "ground_truth.json"
     rng = np.random.default_rng(seed)
     K = default_camera((w, h))
-    ids = rng.choice(len(dic), size=n_markers, replace=False)
-    spacing = 0.5
-    T_world_marker = [
-        Pose(_rot_z(rng.uniform(0, 2 * np.pi)),
-             np.array([k * spacing, rng.uniform(-0.12, 0.12), 0.0]))
-        for k in range(n_markers)
-    ]
-    texture, _ = make_background("noise", (512, 512), rng)
-    texture = texture.astype(np.float32)
-    phase = rng.uniform(0, 2 * np.pi, 4)
+    layout = _video_layout(rng, len(dic), n_markers)
     writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (w, h), isColor=False)
     if not writer.isOpened():
         raise OSError(f"could not open {path} for writing an mp4v video")
@@ -292,24 +296,9 @@ def render_video(
     frames = []
     try:
         for i in range(n):
-            s = i / (n - 1)
-            wob = np.sin(2 * np.pi * s + phase)
-            # Camera position in the world (Z up) and attitude: looking straight down, then
-            # small yaw / pitch / roll; T_cam_world maps world points into the camera frame.
-            centre = np.array([-0.6 + s * ((n_markers - 1) * spacing + 1.2), 0.08 * wob[0],
-                               0.8 + 0.05 * wob[1]])
-            R_world_cam = _rot_z(0.15 * wob[2]) @ _rot_x(np.pi + 0.05 * wob[3])
-            T_cam_world = Pose(R_world_cam.T, -R_world_cam.T @ centre)
-            bg = _ground_background(K, T_cam_world, (w, h), texture, 0.004)
-            placements = [(int(mid), T_cam_world.compose(T), MARKER_LENGTH)
-                          for mid, T in zip(ids, T_world_marker, strict=True)]
-            render = render_markers(K, (w, h), placements, dic,
-                                    background=np.clip(np.rint(bg), 0, 255).astype(np.uint8),
-                                    blur_sigma=0.5, noise_sigma=1.5, rng=rng)
+            render = _video_frame(K, (w, h), dic, layout, i / (n - 1), rng)
             writer.write(render.image)
-            rec = _frame_record(f"{path.name}#{i}", render)
-            rec["params"]["background"] = "noise (ground plane)"
-            frames.append({"index": i, "time": i / fps} | rec)
+            frames.append(_video_record(path.name, i, fps, render))
             if progress is not None:
                 progress(i)
     finally:
@@ -317,6 +306,77 @@ def render_video(
     gt["frames"] = frames
     gt_path.write_text(json.dumps(gt, indent=1))
     return path
+
+
+def _check_video_args(n: object, seed: object, size: object, dictionary: str | Dictionary,
+                      n_markers: object, fps: object, progress: object
+                      ) -> tuple[int, int, tuple[int, int], Dictionary, int, float]:
+    """:func:`render_video`'s arguments checked in order; returns ``n``, ``seed``,
+    ``(width, height)``, the dictionary, ``n_markers`` and ``fps``."""
+    n = check_int(n, "n", low=2)
+    seed = check_int(seed, "seed", low=0)
+    w, h = check_size(size)
+    dic = load_dictionary(dictionary)
+    n_markers = check_int(n_markers, "n_markers", low=1, high=len(dic))
+    fps = check_number(fps, "fps", low=0.0, low_open=True)
+    _check_progress(progress)
+    return n, seed, (w, h), dic, n_markers, fps
+
+
+class _VideoLayout(NamedTuple):
+    """The random scene of :func:`render_video`."""
+
+    ids: NDArray[np.int64]  # marker ids, in order along the row
+    T_world_marker: list[Pose]  # marker-to-world poses (world Z up, ground Z = 0)
+    texture: NDArray[np.float32]  # ground texture, grey levels
+    phase: FloatArray  # (4,) phases of the camera's wobble, rad
+
+
+def _video_layout(rng: np.random.Generator, n_ids: int, n_markers: int) -> _VideoLayout:
+    """Draw :func:`render_video`'s scene: ``n_markers`` distinct ids out of ``n_ids`` in a row
+    along world x, :data:`_VIDEO_SPACING` apart with random yaw and sideways offset, the
+    ground texture and the phases of the camera's wobble."""
+    ids = rng.choice(n_ids, size=n_markers, replace=False)
+    T_world_marker = [
+        Pose(_rot_z(rng.uniform(0, 2 * np.pi)),
+             np.array([k * _VIDEO_SPACING, rng.uniform(-0.12, 0.12), 0.0]))
+        for k in range(n_markers)
+    ]
+    texture, _ = make_background("noise", (512, 512), rng)
+    phase = rng.uniform(0, 2 * np.pi, 4)
+    return _VideoLayout(ids, T_world_marker, texture.astype(np.float32), phase)
+
+
+def _video_camera(s: float, phase: FloatArray, n_markers: int) -> Pose:
+    """World-to-camera pose ``T_cam_world`` at fraction ``s`` in [0, 1] of the flight along the
+    row of ``n_markers`` markers."""
+    wob = np.sin(2 * np.pi * s + phase)
+    # Camera position in the world (Z up) and attitude: looking straight down, then
+    # small yaw / pitch / roll; T_cam_world maps world points into the camera frame.
+    centre = np.array([-0.6 + s * ((n_markers - 1) * _VIDEO_SPACING + 1.2), 0.08 * wob[0],
+                       0.8 + 0.05 * wob[1]])
+    R_world_cam = _rot_z(0.15 * wob[2]) @ _rot_x(np.pi + 0.05 * wob[3])
+    return Pose(R_world_cam.T, -R_world_cam.T @ centre)
+
+
+def _video_frame(K: FloatArray, size: tuple[int, int], dic: Dictionary, layout: _VideoLayout,
+                 s: float, rng: np.random.Generator) -> MarkerRender:
+    """Render :func:`render_video`'s frame at fraction ``s`` of the flight: the markers over
+    the textured ground, clean (blur sigma 0.5 px, noise 1.5)."""
+    T_cam_world = _video_camera(s, layout.phase, len(layout.ids))
+    bg = _ground_background(K, T_cam_world, size, layout.texture, 0.004)
+    placements = [(int(mid), T_cam_world.compose(T), MARKER_LENGTH)
+                  for mid, T in zip(layout.ids, layout.T_world_marker, strict=True)]
+    return render_markers(K, size, placements, dic,
+                          background=np.clip(np.rint(bg), 0, 255).astype(np.uint8),
+                          blur_sigma=0.5, noise_sigma=1.5, rng=rng)
+
+
+def _video_record(video_name: str, i: int, fps: float, render: MarkerRender) -> dict:
+    """Ground-truth record of frame ``i`` of a video (:func:`render_video`)."""
+    rec = _frame_record(f"{video_name}#{i}", render)
+    rec["params"]["background"] = "noise (ground plane)"
+    return {"index": i, "time": i / fps} | rec
 
 
 def _rot_z(angle: float) -> FloatArray:

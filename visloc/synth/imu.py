@@ -163,27 +163,56 @@ def imu_stream(
     TypeError, ValueError
         On a malformed argument (the message names it), or fewer than one sample.
     """
+    checked = _check_imu_args(
+        seconds=seconds, rate_hz=rate_hz, seed=seed, gyro_bias=gyro_bias, gyro_noise=gyro_noise,
+        accel_noise=accel_noise, body_accel_std=body_accel_std,
+        vertical_accel_std=vertical_accel_std, max_tilt=max_tilt,
+        attitude_band_hz=attitude_band_hz, accel_band_hz=accel_band_hz,
+        yaw_amplitude=yaw_amplitude, rest_seconds=rest_seconds, gravity=gravity,
+    )
+    return _simulate_imu(**checked)
+
+
+def _check_imu_args(*, seconds: object, rate_hz: object, seed: object, gyro_bias: object,
+                    gyro_noise: object, accel_noise: object, body_accel_std: object,
+                    vertical_accel_std: object, max_tilt: object, attitude_band_hz: object,
+                    accel_band_hz: object, yaw_amplitude: object, rest_seconds: object,
+                    gravity: object) -> dict:
+    """:func:`imu_stream`'s arguments checked in order (the error names the first bad one),
+    as the keyword arguments of :func:`_simulate_imu`: the sample count ``n`` and period
+    ``dt`` (s) replace ``seconds`` and ``rate_hz``, ``bias`` (3,) ``gyro_bias``."""
     seconds = check_number(seconds, "seconds", low=0.0, low_open=True)
     rate_hz = check_number(rate_hz, "rate_hz", low=0.0, low_open=True)
     seed = check_int(seed, "seed", low=0)
     bias = np.asarray(gyro_bias, dtype=np.float64)
     if bias.shape != (3,) or not np.all(np.isfinite(bias)):
         raise ValueError(f"gyro_bias must be 3 finite numbers (rad/s), got {gyro_bias!r}")
-    gyro_noise = check_number(gyro_noise, "gyro_noise", low=0.0)
-    accel_noise = check_number(accel_noise, "accel_noise", low=0.0)
-    body_accel_std = check_number(body_accel_std, "body_accel_std", low=0.0)
-    vertical_accel_std = check_number(vertical_accel_std, "vertical_accel_std", low=0.0)
-    max_tilt = check_number(max_tilt, "max_tilt", low=0.0, high=math.pi / 2, high_open=True)
-    yaw_amplitude = check_number(yaw_amplitude, "yaw_amplitude", low=0.0)
-    rest_seconds = check_number(rest_seconds, "rest_seconds", low=0.0)
-    gravity = check_number(gravity, "gravity", low=0.0)
-    att_band = _band(attitude_band_hz, "attitude_band_hz")
-    acc_band = _band(accel_band_hz, "accel_band_hz")
-
+    checked = {
+        "seed": seed,
+        "bias": bias,
+        "gyro_noise": check_number(gyro_noise, "gyro_noise", low=0.0),
+        "accel_noise": check_number(accel_noise, "accel_noise", low=0.0),
+        "body_accel_std": check_number(body_accel_std, "body_accel_std", low=0.0),
+        "vertical_accel_std": check_number(vertical_accel_std, "vertical_accel_std", low=0.0),
+        "max_tilt": check_number(max_tilt, "max_tilt", low=0.0, high=math.pi / 2, high_open=True),
+        "yaw_amplitude": check_number(yaw_amplitude, "yaw_amplitude", low=0.0),
+        "rest_seconds": check_number(rest_seconds, "rest_seconds", low=0.0),
+        "gravity": check_number(gravity, "gravity", low=0.0),
+        "att_band": _band(attitude_band_hz, "attitude_band_hz"),
+        "acc_band": _band(accel_band_hz, "accel_band_hz"),
+    }
     n = round(seconds * rate_hz)
     if n < 1:
         raise ValueError(f"seconds * rate_hz must give at least one sample, got {seconds * rate_hz}")
-    dt = 1.0 / rate_hz
+    return checked | {"n": n, "dt": 1.0 / rate_hz}
+
+
+def _simulate_imu(*, n: int, dt: float, seed: int, bias: FloatArray, gyro_noise: float,
+                  accel_noise: float, body_accel_std: float, vertical_accel_std: float,
+                  max_tilt: float, att_band: tuple[float, float], acc_band: tuple[float, float],
+                  yaw_amplitude: float, rest_seconds: float, gravity: float) -> ImuStream:
+    """The stream of :func:`imu_stream` from its checked arguments (:func:`_check_imu_args`):
+    ``n`` samples ``dt`` s apart, every random draw from ``default_rng(seed)``."""
     t = np.arange(n) * dt
     rng = np.random.default_rng(seed)
     phi, dphi = _multisine(rng, t, att_band, 8, max_tilt, peak=True)
@@ -197,19 +226,13 @@ def imu_stream(
     ])
 
     if rest_seconds > 0.0:
-        x = np.clip((t - rest_seconds) / RAMP_SECONDS, 0.0, 1.0)
-        w, dw = x * x * (3.0 - 2.0 * x), 6.0 * x * (1.0 - x) / RAMP_SECONDS  # smoothstep
+        w, dw = _fade_in(t, rest_seconds)
         phi, dphi = w * phi, dw * phi + w * dphi
         theta, dtheta = w * theta, dw * theta + w * dtheta
         psi, dpsi = w * psi, dw * psi + w * dpsi
         acc *= w[:, None]
 
-    sp, cp, st, ct = np.sin(phi), np.cos(phi), np.sin(theta), np.cos(theta)
-    rates = np.column_stack([  # omega = Q(lambda)^-1 lambda', inverse of report eq. (2.7)
-        dphi - st * dpsi,
-        cp * dtheta + sp * ct * dpsi,
-        -sp * dtheta + cp * ct * dpsi,
-    ])
+    rates = _body_rates(phi, theta, dphi, dtheta, dpsi)
     rot = euler_to_matrix(np.column_stack([phi, theta, psi]))  # Rz(psi) Ry(theta) Rx(phi), report eq. (2.6)
     force = np.einsum("nji,nj->ni", rot, acc - np.array([0.0, 0.0, gravity]))
 
@@ -217,3 +240,22 @@ def imu_stream(
     accel = force + accel_noise * rng.standard_normal((n, 3))
     return ImuStream(t=t, roll=phi, pitch=theta, yaw=psi, body_rates=rates, accel_ned=acc,
                      specific_force=force, gyro=gyro, accel=accel, gyro_bias=bias, dt=dt)
+
+
+def _fade_in(t: FloatArray, rest_seconds: float) -> tuple[FloatArray, FloatArray]:
+    """Weight (N,) of the motion at times ``t`` (s) and its time derivative (1/s): 0 until
+    ``rest_seconds``, then a smoothstep up to 1 over :data:`RAMP_SECONDS`."""
+    x = np.clip((t - rest_seconds) / RAMP_SECONDS, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x), 6.0 * x * (1.0 - x) / RAMP_SECONDS  # smoothstep
+
+
+def _body_rates(phi: FloatArray, theta: FloatArray, dphi: FloatArray, dtheta: FloatArray,
+                dpsi: FloatArray) -> FloatArray:
+    """Body rates ``(p, q, r)`` (N, 3), rad/s, from the Z-Y-X Euler angles (rad) and their
+    time derivatives (rad/s)."""
+    sp, cp, st, ct = np.sin(phi), np.cos(phi), np.sin(theta), np.cos(theta)
+    return np.column_stack([  # omega = Q(lambda)^-1 lambda', inverse of report eq. (2.7)
+        dphi - st * dpsi,
+        cp * dtheta + sp * ct * dpsi,
+        -sp * dtheta + cp * ct * dpsi,
+    ])

@@ -361,22 +361,11 @@ def _check_placements(placements: object, dictionary: Dictionary) -> list[Placem
 
 
 def render_markers(
-    K: FloatArray,
-    size: tuple[int, int],
-    placements: Sequence[Placement],
-    dictionary: str | Dictionary,
-    *,
-    background: str | NDArray[np.uint8] | None = None,
-    supersample: int | None = None,
-    margin_cells: float = 1.0,
-    blur_sigma: float = 0.0,
-    motion_blur: float = 0.0, motion_angle: float = 0.0,
-    noise_sigma: float = 0.0,
-    gain: float = 1.0,
-    gradient: float = 0.0,
-    jpeg_quality: int | None = None,
-    rng: np.random.Generator | int | None = None,
-    camera: CameraEffects | None = None,
+    K: FloatArray, size: tuple[int, int], placements: Sequence[Placement], dictionary: str | Dictionary, *,
+    background: str | NDArray[np.uint8] | None = None, supersample: int | None = None, margin_cells: float = 1.0,
+    blur_sigma: float = 0.0, motion_blur: float = 0.0, motion_angle: float = 0.0, noise_sigma: float = 0.0,
+    gain: float = 1.0, gradient: float = 0.0, jpeg_quality: int | None = None,
+    rng: np.random.Generator | int | None = None, camera: CameraEffects | None = None,
 ) -> MarkerRender:
     """Render markers seen by a pinhole camera, with exact ground-truth corners.
 
@@ -421,11 +410,10 @@ def render_markers(
     camera : CameraEffects or None
         A camera model instead of the degradations above (which must then keep their
         defaults): the markers and the background (its grey levels taken as sRGB-encoded and
-        decoded to linear light) form an ideal linear-light image, extended past the frame
-        as far as the lens distortion looks, which
-        :func:`visloc.synth.camera.apply_camera` turns into the frame. Ground-truth corners
-        and ``visible`` are then those of the distorted projections (and a corner must lie
-        where the distortion is still one-to-one).
+        decoded to linear light) form an ideal linear-light image, extended past the frame as
+        far as the lens distortion looks, which :func:`visloc.synth.camera.apply_camera` turns
+        into the frame. Ground-truth corners and ``visible`` are then those of the distorted
+        projections (and a corner must lie where the distortion is still one-to-one).
 
     Returns
     -------
@@ -449,24 +437,30 @@ def render_markers(
                                    gradient=gradient, jpeg_quality=jpeg_quality)
     bg, bg_name, k_ideal = _ideal_background(k, (w, h), background, camera, gen)
     markers = _marker_truths(k, (w, h), camera, items)
+    canvas = _draw_markers(bg, k_ideal, items, dic, supersample, margin_cells)
+    params = {"background": bg_name, "supersample": supersample, "margin_cells": margin_cells}
+    return _finish(canvas, k, k_ideal, (w, h), markers, dic.name, params, camera, gen, **deg)
 
+
+def _draw_markers(bg: FloatArray, k_ideal: FloatArray, items: Sequence[Placement],
+                  dic: Dictionary, supersample: int | None, margin_cells: float) -> FloatArray:
+    """The ideal canvas (H, W) float64: the placements facing the camera composited onto the
+    background ``bg`` (modified in place when exact), farthest first, by exact area coverage
+    or, with ``supersample`` S, by point sampling S x S positions per pixel."""
     order = sorted(range(len(items)), key=lambda i: -float(np.linalg.norm(items[i][1].t)))
     drawn = [i for i in order if faces_camera(items[i][1])]
     if supersample is None:
-        canvas = bg
-        _composite_exact_many(canvas, k_ideal, [(pose, *_plane_polygons(dic.bits[marker_id], length, margin_cells),
-                                                 1e-6 * length) for marker_id, pose, length in (items[i] for i in drawn)])
-    else:
-        s = supersample
-        hc, wc = bg.shape
-        canvas = np.repeat(np.repeat(bg.astype(np.float32), s, axis=0), s, axis=1)
-        for i in drawn:
-            marker_id, pose, length = items[i]
-            _draw_sampled(canvas, k_ideal, pose, dic.bits[marker_id], length, margin_cells, s)
-        canvas = canvas.reshape(hc, s, wc, s).astype(np.float64).mean(axis=(1, 3))
-
-    params = {"background": bg_name, "supersample": supersample, "margin_cells": margin_cells}
-    return _finish(canvas, k, k_ideal, (w, h), markers, dic.name, params, camera, gen, **deg)
+        prints = [(pose, *_plane_polygons(dic.bits[marker_id], length, margin_cells), 1e-6 * length)
+                  for marker_id, pose, length in (items[i] for i in drawn)]
+        _composite_exact_many(bg, k_ideal, prints)
+        return bg
+    s = supersample
+    hc, wc = bg.shape
+    canvas = np.repeat(np.repeat(bg.astype(np.float32), s, axis=0), s, axis=1)
+    for i in drawn:
+        marker_id, pose, length = items[i]
+        _draw_sampled(canvas, k_ideal, pose, dic.bits[marker_id], length, margin_cells, s)
+    return canvas.reshape(hc, s, wc, s).astype(np.float64).mean(axis=(1, 3))
 
 
 def _ideal_background(

@@ -283,35 +283,65 @@ def random_scene(
     RuntimeError
         Markers that cannot be placed.
     """
+    rng, (w, h), dic = _check_scene_args(rng, size, difficulty, camera, dictionary)
+    n = _marker_count(rng, n_markers, difficulty, dic)
+    K = default_camera((w, h))
+    placements = _place(rng, K, (w, h), n, dic, difficulty) if n else []
+    background = _scene_background(rng, background, flat=difficulty in ("easy", "dark"))
+    deg = _scene_degradations(rng, camera, lens, difficulty, K, (w, h))
+    render = render_markers(K, (w, h), placements, dic, background=background,
+                            margin_cells=MARGIN_CELLS, rng=rng, **deg)
+    render.params["difficulty"] = difficulty
+    return render
+
+
+def _check_scene_args(rng: object, size: object, difficulty: object, camera: object,
+                      dictionary: str | Dictionary
+                      ) -> tuple[np.random.Generator, tuple[int, int], Dictionary]:
+    """:func:`random_scene`'s ``rng``, ``size``, ``difficulty``, ``camera`` and ``dictionary``
+    checked in that order; returns the generator, ``(width, height)`` and the dictionary."""
     rng = check_rng(rng, allow_none=False)
     w, h = check_size(size)
     if difficulty not in DIFFICULTIES:
         raise ValueError(f"difficulty must be one of {DIFFICULTIES}, got {difficulty!r}")
     if not isinstance(camera, (bool, np.bool_, CameraEffects)):
         raise TypeError(f"camera must be a bool or a CameraEffects, got {type(camera).__name__}")
-    dic = load_dictionary(dictionary)
+    return rng, (w, h), load_dictionary(dictionary)
+
+
+def _marker_count(rng: np.random.Generator, n_markers: object, difficulty: str,
+                  dic: Dictionary) -> int:
+    """The number of markers of a random scene: ``n_markers`` checked, or if None drawn from
+    1 to 4 (0 for ``'empty'``)."""
     if n_markers is None:
-        n = 0 if difficulty == "empty" else int(rng.integers(1, 5))
-    else:
-        n = check_int(n_markers, "n_markers", low=0, high=min(len(dic), 16))
-        if difficulty == "empty" and n:
-            raise ValueError(f"n_markers must be 0 or None for difficulty 'empty', got {n}")
-    K = default_camera((w, h))
-    placements = _place(rng, K, (w, h), n, dic, difficulty) if n else []
-    if background is None:
-        flat = difficulty in ("easy", "dark")
-        choices = TEXTURES if flat else tuple(t for t in TEXTURES if t != "flat")
-        background = str(rng.choice(choices))
+        return 0 if difficulty == "empty" else int(rng.integers(1, 5))
+    n = check_int(n_markers, "n_markers", low=0, high=min(len(dic), 16))
+    if difficulty == "empty" and n:
+        raise ValueError(f"n_markers must be 0 or None for difficulty 'empty', got {n}")
+    return n
+
+
+def _scene_background(rng: np.random.Generator, background: str | NDArray[np.uint8] | None, *,
+                      flat: bool) -> str | NDArray[np.uint8]:
+    """``background`` as given, or if None a random texture name (``'flat'`` among the
+    choices only if ``flat``)."""
+    if background is not None:
+        return background
+    choices = TEXTURES if flat else tuple(t for t in TEXTURES if t != "flat")
+    return str(rng.choice(choices))
+
+
+def _scene_degradations(rng: np.random.Generator, camera: bool | CameraEffects,
+                        lens: tuple[float, float] | None, difficulty: str, K: FloatArray,
+                        size: tuple[int, int]) -> dict:
+    """The image degradations of a random scene, as keyword arguments of
+    :func:`render_markers`: ``camera`` as given, a random camera model (with ``lens`` as its
+    distortion if given), or random degradations of the grey levels."""
     if isinstance(camera, CameraEffects):
-        deg: dict = {"camera": camera}
-    elif camera:
-        effects = _camera_effects(rng, difficulty, K, (w, h))
+        return {"camera": camera}
+    if camera:
+        effects = _camera_effects(rng, difficulty, K, size)
         if lens is not None:  # one lens for a whole data set
             effects = replace(effects, k1=float(lens[0]), k2=float(lens[1]))
-        deg = {"camera": effects}
-    else:
-        deg = _degradations(rng, difficulty)
-    render = render_markers(K, (w, h), placements, dic, background=background,
-                            margin_cells=MARGIN_CELLS, rng=rng, **deg)
-    render.params["difficulty"] = difficulty
-    return render
+        return {"camera": effects}
+    return _degradations(rng, difficulty)

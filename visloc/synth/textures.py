@@ -201,39 +201,64 @@ def degrade(
     gradient_angle : float or None
         Direction (radians, x towards y) in which the illumination falls off, if any.
     """
-    img = image.astype(np.float32)
-    if blur_sigma > 0:
-        img = cv2.GaussianBlur(img, (0, 0), blur_sigma, borderType=cv2.BORDER_REFLECT)
-    if motion_blur > 0:
-        img = cv2.filter2D(img, -1, motion_kernel(motion_blur, motion_angle),
-                           borderType=cv2.BORDER_REFLECT)
+    img = _blur(image.astype(np.float32), blur_sigma, motion_blur, motion_angle)
     if not fast_noise:
         img = img.astype(np.float64)  # the stored renders' arithmetic
     angle = None
     if gradient > 0:
         angle = float(rng.uniform(0.0, 2.0 * np.pi))
-        h, w = img.shape
-        ys, xs = np.mgrid[0:h, 0:w]
-        proj = xs * np.cos(angle) + ys * np.sin(angle)
-        span = max(float(proj.max() - proj.min()), 1e-12)
-        img *= 1.0 - gradient * (proj - proj.min()) / span
+        img *= _illumination_ramp(img.shape, angle, gradient)
     if gain != 1.0:
         img *= gain
+    out = _add_noise_and_quantise(img, rng, noise_sigma, fast_noise)
+    if jpeg_quality is not None:
+        out = _jpeg_round_trip(out, jpeg_quality)
+    return out, angle
+
+
+def _blur(img: NDArray[np.float32], blur_sigma: float, motion_blur: float,
+          motion_angle: float) -> NDArray[np.float32]:
+    """Gaussian optical blur (sigma, px) then linear motion blur (length, px; angle, rad) of a
+    float32 image, borders mirrored; a zero sigma or length skips that blur."""
+    if blur_sigma > 0:
+        img = cv2.GaussianBlur(img, (0, 0), blur_sigma, borderType=cv2.BORDER_REFLECT)
+    if motion_blur > 0:
+        img = cv2.filter2D(img, -1, motion_kernel(motion_blur, motion_angle),
+                           borderType=cv2.BORDER_REFLECT)
+    return img
+
+
+def _illumination_ramp(shape: tuple[int, int], angle: float, gradient: float) -> FloatArray:
+    """Illumination factor (H, W): 1 falling linearly to ``1 - gradient`` across the image
+    along direction ``angle`` (rad, x towards y)."""
+    h, w = shape
+    ys, xs = np.mgrid[0:h, 0:w]
+    proj = xs * np.cos(angle) + ys * np.sin(angle)
+    span = max(float(proj.max() - proj.min()), 1e-12)
+    return 1.0 - gradient * (proj - proj.min()) / span
+
+
+def _add_noise_and_quantise(img: NDArray, rng: np.random.Generator, noise_sigma: float,
+                            fast_noise: bool) -> NDArray[np.uint8]:
+    """Add Gaussian noise (sigma in grey levels; 0: none) to ``img``, round (half to even) and
+    clip to uint8; see :func:`degrade`'s ``fast_noise``. ``img`` is float32 with
+    ``fast_noise``, else float64 and overwritten."""
     if fast_noise:  # float32 throughout; OpenCV's generator seeded from rng, one rounding add
         noise = np.zeros(img.shape, np.float32)
         if noise_sigma > 0:
             cv2.setRNGSeed(int(rng.integers(1 << 31)))
             cv2.randn(noise, 0.0, float(noise_sigma))
-        out = cv2.add(img, noise, dtype=cv2.CV_8U)  # rounded half to even and clipped, as below
-    else:
-        if noise_sigma > 0:
-            img += rng.normal(0.0, noise_sigma, img.shape)
-        np.rint(img, out=img)  # in place: a new array from np.clip costs 8x as much at 320 x 240
-        np.clip(img, 0, 255, out=img)
-        out = img.astype(np.uint8)
-    if jpeg_quality is not None:
-        ok, buf = cv2.imencode(".jpg", out, [cv2.IMWRITE_JPEG_QUALITY, int(jpeg_quality)])
-        if not ok:  # pragma: no cover - OpenCV always encodes a valid grey image
-            raise RuntimeError("JPEG encoding failed")
-        out = cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE)
-    return out, angle
+        return cv2.add(img, noise, dtype=cv2.CV_8U)  # rounded half to even and clipped, as below
+    if noise_sigma > 0:
+        img += rng.normal(0.0, noise_sigma, img.shape)
+    np.rint(img, out=img)  # in place: a new array from np.clip costs 8x as much at 320 x 240
+    np.clip(img, 0, 255, out=img)
+    return img.astype(np.uint8)
+
+
+def _jpeg_round_trip(image: NDArray[np.uint8], quality: int) -> NDArray[np.uint8]:
+    """Encode a grey uint8 image as JPEG at ``quality`` (1-100) and decode it again."""
+    ok, buf = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+    if not ok:  # pragma: no cover - OpenCV always encodes a valid grey image
+        raise RuntimeError("JPEG encoding failed")
+    return cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE)

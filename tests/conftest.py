@@ -1,5 +1,6 @@
 """Shared pytest fixtures and helpers."""
 
+import os
 import sys
 
 # Bytecode is written for this run even where the environment says not to (this machine sets
@@ -8,6 +9,15 @@ import sys
 # modules from source. Measured on fresh clones on the 2-core host, runs interleaved: 75.5 and
 # 72.6 s without this line, 72.6 and 70.1 s with it.
 sys.dont_write_bytecode = False
+
+# One thread each for OpenBLAS, OpenMP and OpenCV in the xdist workers (and the CLI and Dask
+# subprocesses they start): one worker per core already fills the cores, and each library's own
+# pool on top of that left threads waiting for each other (set before numpy and cv2 load, unless
+# the environment chose). Whole suite on the 2-core host, 6 runs each, alternated: 57.5-74.6 s
+# (mean 67.9) against 69.0-74.6 s (mean 72.9) without.
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    for _name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "OPENCV_FOR_THREADS_NUM"):
+        os.environ.setdefault(_name, "1")
 
 import cv2
 import numpy as np

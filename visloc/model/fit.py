@@ -174,12 +174,11 @@ def fit_propulsion(
     w = _weights(weights, n)
 
     m, j = t.shape[0], q.shape[0]
-    cols = m + j + 1
     a_mat, b_vec, w_vec, thrust_rows = _system(p, t, q, w)
     sw = np.sqrt(w_vec)
     # report eq. (E.8): x = (A^T W A)^-1 A^T W b, solved as lstsq(sqrt(W) A, sqrt(W) b)
     x, _, rank, _ = np.linalg.lstsq(a_mat * sw[:, None], b_vec * sw, rcond=None)
-    if rank < cols:
+    if rank < a_mat.shape[1]:  # m + j + 1 parameters
         raise ValueError(
             "thrust, torque: the data do not determine every parameter (each motor needs at "
             "least two measurements with non-zero weight)"

@@ -92,7 +92,8 @@ class MarkerDetection:
     confidence : float
         Bit certainty in [0, 1], OpenCV's definition: 1 minus the share of the marker's read
         area (every cell, border included, less a margin) whose colour contradicts the
-        decoded code. 1 for a clean read; corrected bits and stained cells lower it.
+        decoded code. 1 for a clean read; corrected bits and stained cells lower it. NaN
+        when the detector did not read it (``DetectorParams.confidence=False``).
     inverted : bool
         Whether the marker is white on black (found with ``inverted=True`` or ``"both"``).
     """
@@ -122,13 +123,14 @@ class MarkerDetection:
 
     def to_dict(self) -> dict:
         """JSON-ready dict: ``id``, ``corners`` (list of [x, y]), ``hamming``, ``margin``,
-        ``confidence``, ``refined`` and, for white-on-black markers, ``inverted``."""
+        ``confidence`` (null when not read), ``refined`` and, for white-on-black markers,
+        ``inverted``."""
         out = {
             "id": int(self.id),
             "corners": [[round(float(x), 4), round(float(y), 4)] for x, y in self.corners],
             "hamming": int(self.hamming),
             "margin": round(float(self.margin), 4),
-            "confidence": round(float(self.confidence), 4),
+            "confidence": round(float(self.confidence), 4) if math.isfinite(self.confidence) else None,
             "refined": bool(self.refined),
         }
         if self.inverted:

@@ -316,6 +316,28 @@ def test_confidence_falls_with_damaged_cells():
     assert hurt.confidence == pytest.approx(1 - (5 - 0.13 * 12) / (0.74 * 12) / 36, abs=0.003)
 
 
+def test_confidence_off_skips_only_the_area_read(monkeypatch):
+    import json
+
+    import visloc.markers.detector as det_mod
+
+    img, _ = _sheet([7, 12])
+    on = MarkerDetector("DICT_4X4_50").detect(img)
+    reads = []
+    monkeypatch.setattr(det_mod.MarkerDetector, "_area_check",
+                        lambda self, *a: reads.append(1) or pytest.fail("area read with confidence=False"))
+    off = MarkerDetector("DICT_4X4_50", confidence=False).detect(img)
+    assert len(on) == 2 and _same(on, off) and not reads
+    assert all(np.isnan(d.confidence) for d in off)
+    assert json.loads(json.dumps(off[0].to_dict()))["confidence"] is None  # strict JSON: null, not NaN
+    monkeypatch.undo()
+    # a bit threshold needs the area read, so the confidence comes with it
+    (d,) = MarkerDetector("DICT_4X4_50", confidence=False, bit_threshold=0.49).detect(_sheet([7])[0])
+    assert d.confidence > 0.95
+    with pytest.raises(TypeError, match="confidence must be True or False"):
+        MarkerDetector("DICT_4X4_50", confidence="no")
+
+
 def _same(a, b):
     return [d.id for d in a] == [d.id for d in b] and all(np.array_equal(x.corners, y.corners) for x, y in zip(a, b))
 

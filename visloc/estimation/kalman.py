@@ -460,9 +460,11 @@ class PositionVelocityKF:
         cov = as_float_array(R, "R", (self.dims, self.dims))
         if not all_finite(cov):
             return None
-        # np.allclose(cov, cov.T, rtol=1e-9, atol=1e-12 max|cov|) without its overhead (finite here)
-        mag = np.abs(cov)
-        if not np.all(np.abs(cov - cov.T) <= 1e-12 * float(np.max(mag)) + 1e-9 * mag.T):
+        # np.allclose(cov, cov.T, rtol=1e-9, atol=1e-12 max|cov|) on floats (finite here): the
+        # same test as on the arrays, several times faster on a few values
+        d, v = self.dims, cov.ravel().tolist()
+        atol = 1e-12 * max(map(abs, v))
+        if any(abs(v[i * d + j] - v[j * d + i]) > atol + 1e-9 * abs(v[j * d + i]) for i in range(d) for j in range(d)):
             raise ValueError(f"R must be symmetric, got {cov.tolist()}")
         try:
             np.linalg.cholesky(cov)

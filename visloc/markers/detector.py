@@ -232,6 +232,13 @@ class DetectorParams:
         alone (the area read only gives the confidence): on small markers in real photos
         (about a pixel per cell) the two reads differ on a cell or two, and a marker both
         OpenCV and stage 9 read cleanly was lost to the area check.
+    confidence : bool
+        Whether stage 10 reads the area of every accepted marker's cells for its
+        ``confidence`` (OpenCV's definition, :class:`~visloc.types.MarkerDetection`): a second
+        sampling of each marker (in the simulator, 0.21 of the tracker's 1.14 ms per frame).
+        ``False`` leaves ``confidence`` NaN, for a caller that uses only the ids and corners
+        (the simulator's vision estimator); with a ``bit_threshold`` the area is read all the
+        same.
     error_correction_rate : float
         Stage 10: fraction of the dictionary's correction capacity used (OpenCV: 0.6).
     native : bool or None
@@ -275,6 +282,7 @@ class DetectorParams:
     min_quiet_zone: float = 0.25
     cell_margin: float = 0.13
     bit_threshold: float | None = None
+    confidence: bool = True
     error_correction_rate: float = 0.6
     native: bool | None = None
 
@@ -868,7 +876,9 @@ class MarkerDetector:
         valid, thr, ids, shift, matched = reads[0], reads[4], reads[5], reads[6], reads[8]
         accept = valid & matched
         confidence = np.zeros(len(quads))
-        if accept.any():  # OpenCV's read of the accepted markers: cell areas, confidence, bit threshold
+        if not p.confidence and p.bit_threshold is None:  # nobody reads the area
+            confidence[accept] = np.nan
+        elif accept.any():  # OpenCV's read of the accepted markers: cell areas, confidence, bit threshold
             acc = np.flatnonzero(accept)
             confidence[acc], clear = self._area_check(gray, corners[acc], thr[acc], ids[acc], shift[acc])
             accept[acc[~clear]] = False
@@ -950,7 +960,7 @@ def _check_params(p: DetectorParams) -> None:
         raise ValueError("passes, dark_passes: at least one search pass is needed")
     if not isinstance(p.candidates, CandidateFilter):
         raise TypeError(f"candidates: expected a CandidateFilter, got {type(p.candidates).__name__}")
-    for key in ("board_retry", "refine", "bend"):
+    for key in ("board_retry", "refine", "bend", "confidence"):
         if not isinstance(getattr(p, key), (bool, np.bool_)):
             raise TypeError(f"{key} must be True or False, got {getattr(p, key)!r}")
     ints = {"erode": (0, 5), "refine_max_iterations": (1, 100), "refine_iterations": (1, p.refine_max_iterations),

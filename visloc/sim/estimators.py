@@ -108,7 +108,8 @@ class VisionEstimator:
             raise TypeError(f"camera: expected BottomCamera, got {type(camera).__name__}")
         s = as_array(initial_state, "initial_state", (12,))
         self.camera = camera
-        self.detector = MarkerDetector(camera.dictionary, response="linear")  # the floor renders are linear
+        # the floor renders are linear; the pose uses the ids and corners, not the confidence
+        self.detector = MarkerDetector(camera.dictionary, response="linear", confidence=False)
         self.tracker = MarkerTracker(self.detector, redetect_every=redetect_every)
         self._last_pose: Pose | None = None
         self.intrinsics = Camera(camera.K)

@@ -15,7 +15,8 @@ Printed per method: chessboard corners found (of those visible) and their RMS an
 against the truth; calibrating from views 0-19 of each set (OpenCV's five-coefficient model for
 all): the errors of fx, fy, cx, cy (px) and the RMS reprojection error on views 20-29 (their
 true corners, each view's pose solved with the calibrated camera by ``solvePnP``); and the time
-to calibrate from all 30 views (detection plus solver).
+to calibrate from all 30 views (detection plus solver), each view's detection and the solver
+starting when the host runs at its normal speed (``_timing.Steady``).
 
 A second table does the same for visloc's own marker grid as the board (a 5 x 9 ``GridMap`` of
 4 cm DICT_4X4_50 markers, ``marker_map_views``: the same camera and poses, seen from above):
@@ -42,6 +43,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 from _results import fmt, write_results
+from _timing import steady
 
 from visloc.boards import (
     CharucoBoard,
@@ -118,6 +120,7 @@ def run(seeds: list[int]) -> dict:
         for k, view in enumerate(views):
             order = list(run_) if k % 2 == 0 else list(run_)[::-1]
             for m in order:
+                steady().wait(every=0.25)
                 t0 = time.perf_counter()
                 found[m][k] = run_[m](view.image)
                 spent[m] += time.perf_counter() - t0
@@ -131,6 +134,7 @@ def run(seeds: list[int]) -> dict:
             s["f_err"].extend([abs(K[0, 0] - truth_K[0, 0]), abs(K[1, 1] - truth_K[1, 1])])
             s["c_err"].extend([abs(K[0, 2] - truth_K[0, 2]), abs(K[1, 2] - truth_K[1, 2])])
             s["holdout_rms"].append(_holdout_rms(K, dist, views[N_CALIB:]))
+            steady().wait()
             t0 = time.perf_counter()
             _calibrate(m, found[m])
             s["seconds"].append(spent[m] + time.perf_counter() - t0)
@@ -183,6 +187,7 @@ def run_grid(seeds: list[int]) -> dict:
         views = marker_map_views(GRID, "DICT_4X4_50", N_VIEWS, size=SIZE, seed=100 + seed)
         K_true = views[0].render.K
         for m, fn in run_.items():
+            steady().wait()
             t0 = time.perf_counter()
             found = [fn(v.render.image) for v in views]
             s = stats[m]
@@ -280,6 +285,7 @@ def main(argv=None) -> int:
     result = {"machine": {"python": sys.version.split()[0], "opencv": cv2.__version__, "numpy": np.__version__,
                           "platform": platform.platform(), "cores": len(__import__("os").sched_getaffinity(0))},
               "seeds": seeds, "methods": run(seeds), "grid": run_grid(seeds), "defocus": run_defocus()}
+    result["steady"] = steady().summary()
     write_results(args.out, "calibrate", result, markdown(result))
     return 0
 

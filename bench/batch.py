@@ -84,7 +84,7 @@ def run(frames: int, recordings: int, rounds: int, work: Path) -> dict:
             "ms_per_frame_serial": 1e3 * serial / (frames * recordings)}
 
 
-def task_overhead(work: Path, tasks: int = 30, rounds: int = 3) -> dict:
+def task_overhead(work: Path, tasks: int = 30, rounds: int = 9) -> dict:
     """Seconds per task beyond detection: ``tasks`` copies of a two-frame video through
     ``run_batch`` on one warm local worker, ``rounds`` times: the fastest round's wall time per
     task, and the median over the tasks of each task's fastest run time (which includes the two

@@ -10,8 +10,8 @@ The recordings: one rendered 640x480 marker video (``visloc render markers --vid
 recording: a serial loop of processes (a shell loop), two processes side by side (half the
 recordings each), ``visloc batch`` with 1 and with 2 local workers. Configurations alternate
 over rounds; the fastest round of each is kept (a slow spell of the host only lengthens a
-round), and the speed-ups are ratios of those fastest rounds. Each run starts when the host runs at its
-normal speed (``_timing.Steady``: the host has slow spells of a few seconds).
+round), and the speed-ups are ratios of those fastest rounds. Each run starts when the host
+runs at its normal speed (``_timing.Steady``: the host has slow spells of a few seconds).
 """
 
 from __future__ import annotations
@@ -74,13 +74,14 @@ def run(frames: int, recordings: int, rounds: int, work: Path) -> dict:
             spent[name].append(time.perf_counter() - t0)
             assert len(list(out.glob("rec*.jsonl"))) == recordings
             shutil.rmtree(out)
-    med = {k: float(np.min(v)) for k, v in spent.items()}
-    serial = med["serial loop of visloc detect"]
-    two = serial / med["two visloc detect side by side"]
-    b2 = serial / med["visloc batch, 2 workers"]
+    best = {k: float(np.min(v)) for k, v in spent.items()}
+    serial = best["serial loop of visloc detect"]
+    two = serial / best["two visloc detect side by side"]
+    b2 = serial / best["visloc batch, 2 workers"]
     return {"frames_per_recording": frames, "recordings": recordings, "rounds": rounds,
-            "seconds": med, "seconds_median": {k: float(np.median(v)) for k, v in spent.items()}, "speedup_two_processes": two, "speedup_batch_2_workers": b2,
-            "batch_vs_processes": b2 / two, "overhead_1_worker": med["visloc batch, 1 worker"] / serial - 1.0,
+            "seconds": best, "seconds_median": {k: float(np.median(v)) for k, v in spent.items()},
+            "speedup_two_processes": two, "speedup_batch_2_workers": b2,
+            "batch_vs_processes": b2 / two, "overhead_1_worker": best["visloc batch, 1 worker"] / serial - 1.0,
             "ms_per_frame_serial": 1e3 * serial / (frames * recordings)}
 
 

@@ -344,3 +344,16 @@ def test_batch_options_the_command_refuses_are_one_usage_error(rendered, tmp_pat
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and message in err and f"for {command}" in err
     assert not out.exists()
+
+
+def test_one_parser_serves_every_call_without_carrying_options_over():
+    """``main`` reuses one parser per process (``visloc batch`` runs it once per task): options
+    of one call must not leak into the next."""
+    from visloc.cli import _shared_parser
+
+    parser = _shared_parser()
+    assert _shared_parser() is parser
+    first = parser.parse_args(["detect", "a.png", "--fast", "--redetect-every", "5", "--inverted", "both"])
+    second = parser.parse_args(["detect", "b.png"])
+    assert (first.fast, first.redetect_every, first.inverted) == (True, 5, "both")
+    assert (second.source, second.fast, second.redetect_every, second.inverted) == ("b.png", False, 1, "no")

@@ -6,6 +6,10 @@ at its normal speed most of the time, but in spells of a few milliseconds to abo
 (several in a row now and then) the same work takes 1.4-1.9x as long, OpenCV and Python
 alike. A bench whose tables are timed partly in such spells moves by 15-30 % from run to run
 while its ratios (visloc and the peer interleaved) hold.
+The reference below slows down with image work: logged with a 1280x720 OpenCV blur and
+adaptive threshold every 0.4 s for 45 s of a slow spell (2026-12-07), the two moved together
+(correlation 0.96), and the image work was more than 15 % slow in 2 % of the samples where the
+reference passed.
 
 :class:`Steady` times a small reference workload (about 0.5 ms, one thread) before a chunk of
 timed work and, while it runs more than ``tolerance`` times slower than its normal time (the

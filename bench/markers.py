@@ -261,6 +261,10 @@ def run_boards(rounds: int, n: int, seed0: int = 9) -> dict:
     return stats
 
 
+#: passes of :func:`stage_times` through the frames (the fastest is kept; 3 moved its small
+#: stage times by 20-25 % from run to run)
+STAGE_ROUNDS = 7
+
 #: the detector's stage functions whose time :func:`stage_times` measures, in pipeline order
 STAGES = {"blur": "2 blur", "threshold": "3 threshold", "find_candidates": "4-5 contours + filter",
           "fit_quads": "6-7 corner split + line fits",
@@ -356,7 +360,7 @@ def markdown(result) -> str:
     if result.get("stages"):
         sizes = list(result["stages"])
         lines.append("\n**Where visloc's time goes** (ms per frame in each stage over the same camera-like "
-                     "DICT_4X4_50 frames, the pass through them with the lowest total of 3, every pass on one thread; "
+                     f"DICT_4X4_50 frames, the pass through them with the lowest total of {STAGE_ROUNDS}, every pass on one thread; "
                      "the timers add a little)\n")
         lines.append("| stage | " + " | ".join(sizes) + " |")
         lines.append("|---|" + "---|" * len(sizes))
@@ -393,7 +397,7 @@ def main(argv=None) -> int:
                                            "DICT_4X4_50", lin_sets, 1, camera=False)
     print("AprilGrid boards ...", file=sys.stderr, flush=True)
     result["boards"] = run_boards(args.rounds, 4 if args.quick else 12)
-    result["stages"] = {f"{w}x{h}": stage_times((w, h), sets, 1) for w, h in sizes}
+    result["stages"] = {f"{w}x{h}": stage_times((w, h), sets, 1, rounds=STAGE_ROUNDS) for w, h in sizes}
     for at in _APRILTAG:
         at.close()
     result["steady"] = steady().summary()

@@ -6,8 +6,12 @@ pymavlink receiver draining it.
 
 Each row times ``visloc localize``'s own per-fix step (:func:`visloc.commands.localize._send_fix`:
 the frame change, the body attitude, the covariance blocks, packing, the send) over a
-filter that has taken real fixes, N calls, median and 90th percentile in microseconds; every
-50 ms the timing waits until the host runs at its normal speed (``_timing.Steady``).
+filter that has taken real fixes: N calls per message in each of 9 rounds (the messages
+alternating), each round started when the host runs at its normal speed (``_timing.Steady``);
+the median and 90th percentile in microseconds of each message's least disturbed round (the
+lowest 90th percentile: the host's slow spells of a few milliseconds reach one round's tail and
+not another's; in four single-round runs one after the other the 90th percentile went 52-117 µs
+and even the median 44-108 µs). The JSON keeps every round's 90th percentile.
 """
 
 from __future__ import annotations
@@ -66,7 +70,7 @@ def _filter() -> MapFixFusion:
     return fusion
 
 
-def run(n: int) -> dict:
+def run(n: int, rounds: int = 9) -> dict:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
@@ -78,20 +82,27 @@ def run(n: int) -> dict:
         raise RuntimeError("the MAVLink receiver did not start")
     fusion = _filter()
     R_map_cam = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
-    rows = {}
+    spent: dict[str, list[np.ndarray]] = {"vision": [], "odometry": []}
     with MavlinkSink(f"udpout:127.0.0.1:{port}") as link:
-        for message in ("vision", "odometry"):
-            args = SimpleNamespace(map_frame="nwu", mavlink_message=message)
-            for k in range(50):  # warm: the first calls import and allocate
-                _send_fix(link, args, fusion, R_map_cam, k / 30)
-            spent = []
-            for k in range(n):
-                steady().wait(every=0.05)
-                t0 = time.perf_counter()
-                _send_fix(link, args, fusion, R_map_cam, 1.0 + k / 30)
-                spent.append(time.perf_counter() - t0)
-            us = 1e6 * np.array(spent)
-            rows[message] = {"calls": n, "median_us": float(np.median(us)), "p90_us": float(np.percentile(us, 90))}
+        for message in spent:  # warm: the first calls import and allocate
+            for k in range(50):
+                _send_fix(link, SimpleNamespace(map_frame="nwu", mavlink_message=message), fusion, R_map_cam, k / 30)
+        for r in range(rounds):
+            for message in (list(spent) if r % 2 == 0 else list(spent)[::-1]):
+                args = SimpleNamespace(map_frame="nwu", mavlink_message=message)
+                steady().wait()
+                times = np.empty(n)
+                for k in range(n):
+                    t0 = time.perf_counter()
+                    _send_fix(link, args, fusion, R_map_cam, 1.0 + k / 30)
+                    times[k] = time.perf_counter() - t0
+                spent[message].append(1e6 * times)
+        rows = {}
+        for message, per_round in spent.items():
+            quiet = min(per_round, key=lambda us: np.percentile(us, 90))  # the least disturbed round
+            rows[message] = {"calls": n, "rounds": rounds, "median_us": float(np.median(quiet)),
+                             "p90_us": float(np.percentile(quiet, 90)),
+                             "p90_us_rounds": [round(float(np.percentile(us, 90)), 1) for us in per_round]}
         sent = sum(link.sent.values())
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:  # the end of the run
         s.sendto(b"end", ("127.0.0.1", port))
@@ -101,8 +112,9 @@ def run(n: int) -> dict:
 
 def markdown(result: dict) -> str:
     lines = [("**MAVLink out** (loopback UDP, a pymavlink receiver in another process; per fix: frame change, "
-              "attitude, covariances, pack, send)"), "",
-             "| message | calls | median µs | p90 µs |", "|---|---|---|---|"]
+              "attitude, covariances, pack, send; the least disturbed of "
+              f"{next(iter(result['rows'].values()))['rounds']} rounds)"), "",
+             "| message | calls per round | median µs | p90 µs |", "|---|---|---|---|"]
     names = {"vision": "VISION_POSITION_ESTIMATE", "odometry": "ODOMETRY"}
     for k, r in result["rows"].items():
         lines.append(f"| {names[k]} | {r['calls']} | {fmt(r['median_us'], 1)} | {fmt(r['p90_us'], 1)} |")
@@ -112,10 +124,11 @@ def markdown(result: dict) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--n", type=int, default=2000)
+    ap.add_argument("--n", type=int, default=2000, help="calls per message and round")
+    ap.add_argument("--rounds", type=int, default=9)
     ap.add_argument("--out", default=str(ROOT / "bench/results"))
     args = ap.parse_args(argv)
-    result = run(args.n)
+    result = run(args.n, args.rounds)
     result["machine"] = {"python": sys.version.split()[0], "platform": platform.platform()}
     result["steady"] = steady().summary()
     write_results(args.out, "mavlink", result, markdown(result))

@@ -43,7 +43,9 @@ them. Timing: ``--rounds`` rounds, every image with each method in turn
 (alternating order); the table shows each image's best round (the least disturbed one: on
 this 2-core machine OpenCV's two threads sometimes share one core, which makes its times
 bimodal, 4.0 or 6.4 ms on one photo, and the median flip between the modes from run to run),
-and ``ms total`` sums those bests. The JSON keeps every round and the median.
+and ``ms total`` sums those bests. The JSON keeps every round and the median. Each timed
+call starts when the host runs at its normal speed (``_timing.Steady``, checked at most every
+0.25 s).
 
 Usage::
 
@@ -74,6 +76,7 @@ from _peers import (
     opencv_detector,
 )
 from _results import fmt, write_results
+from _timing import steady
 
 from visloc.markers import MarkerDetector
 
@@ -229,6 +232,7 @@ def run_images(items, runner: Runner, rounds: int) -> None:
                 order = order[::-1]
             for m in order:
                 run = it["runs"][m]
+                steady().wait(every=0.25)  # the host at its normal speed (bench/_timing.py)
                 try:
                     dets, dt = runner.run(m, it["gray"], it["dict_path"], it["family"])
                 except PeerCrashed as e:
@@ -532,6 +536,7 @@ def main(argv=None) -> int:
         "misses": misses(rows),
         "negatives": neg,
     }
+    result["steady"] = steady().summary()
     result["seconds"] = time.perf_counter() - t_start
     write_results(args.out, "real_photos", result, markdown(result), default=_plain)
     print(f"({result['seconds']:.0f} s)", file=sys.stderr)

@@ -89,12 +89,10 @@ def run(frames: int, recordings: int, rounds: int, work: Path) -> dict:
             "ms_per_frame_serial": 1e3 * serial / (frames * recordings)}
 
 
-def task_overhead(work: Path, tasks: int = 30, rounds: int = 9, lengths: tuple[int, int] = (2, 20),
-                  workers: int = 1) -> dict:
+def task_overhead(work: Path, tasks: int = 30, rounds: int = 9, lengths: tuple[int, int] = (2, 20)) -> dict:
     """Milliseconds per task beyond its frames: ``tasks`` copies of a short and of a longer
     video (``lengths`` frames) through ``run_batch`` on one warm local worker, the two lengths
-    alternating over ``rounds`` rounds, on ``workers`` fresh worker processes one after the
-    other. From the fastest round of each length, the wall time per task is a straight line in
+    alternating over ``rounds`` rounds. From the fastest round of each length, the wall time per task is a straight line in
     the frames per task: its slope is the time per frame in a worker (reading and detection), its
     intercept the fixed cost of a task (scheduling, opening the video, writing the output)."""
     from dask.distributed import LocalCluster
@@ -107,20 +105,17 @@ def task_overhead(work: Path, tasks: int = 30, rounds: int = 9, lengths: tuple[i
                         "640x480", "--seed", "3"], check=True, capture_output=True)
         recs[n] = [str(shutil.copy(work / f"v{n}" / "markers.mp4", work / f"v{n}_{k:03d}.mp4")) for k in range(tasks)]
     walls: dict[int, list[float]] = {n: [] for n in lengths}
-    for _ in range(workers):
-        with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster:
-            run_batch("detect", recs[lengths[1]][:2], "", work / "warm", scheduler=cluster.scheduler_address,
-                      force=True)
-            for r in range(rounds):
-                for n in (lengths if r % 2 == 0 else lengths[::-1]):
-                    steady().wait()
-                    t0 = time.perf_counter()
-                    run_batch("detect", recs[n], "", work / f"out{n}", scheduler=cluster.scheduler_address,
-                              force=True)
-                    walls[n].append(time.perf_counter() - t0)
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster:
+        run_batch("detect", recs[lengths[1]][:2], "", work / "warm", scheduler=cluster.scheduler_address, force=True)
+        for r in range(rounds):
+            for n in (lengths if r % 2 == 0 else lengths[::-1]):
+                steady().wait()
+                t0 = time.perf_counter()
+                run_batch("detect", recs[n], "", work / f"out{n}", scheduler=cluster.scheduler_address, force=True)
+                walls[n].append(time.perf_counter() - t0)
     short, long_ = (1e3 * float(np.min(walls[n])) / tasks for n in lengths)
     per_frame = (long_ - short) / (lengths[1] - lengths[0])
-    return {"tasks": tasks, "rounds": rounds, "workers": workers, "lengths": list(lengths),
+    return {"tasks": tasks, "rounds": rounds, "lengths": list(lengths),
             "ms_per_task": {str(n): v for n, v in zip(lengths, (short, long_))},
             "ms_per_frame": per_frame, "ms_fixed": short - lengths[0] * per_frame}
 

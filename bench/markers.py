@@ -273,7 +273,7 @@ STAGES = {"blur": "2 blur", "threshold": "3 threshold", "find_candidates": "4-5 
           "cell_white_fractions": "9 area read (confidence)", "decode": "10 dictionary"}
 
 
-def stage_times(size, sets, seed0, rounds=3):
+def stage_times(size, sets, seed0, rounds=STAGE_ROUNDS):
     """Where visloc's time goes: ms per frame in each stage function of the detector (wrapped
     with a timer for this run only) over the same rendered frames as :func:`run_rendered`:
     the split of the fastest of ``rounds`` passes through the frames (a slow spell of the host
@@ -397,7 +397,7 @@ def main(argv=None) -> int:
                                            "DICT_4X4_50", lin_sets, 1, camera=False)
     print("AprilGrid boards ...", file=sys.stderr, flush=True)
     result["boards"] = run_boards(args.rounds, 4 if args.quick else 12)
-    result["stages"] = {f"{w}x{h}": stage_times((w, h), sets, 1, rounds=STAGE_ROUNDS) for w, h in sizes}
+    result["stages"] = {f"{w}x{h}": stage_times((w, h), sets, 1) for w, h in sizes}
     for at in _APRILTAG:
         at.close()
     result["steady"] = steady().summary()

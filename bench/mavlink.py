@@ -82,14 +82,15 @@ def run(n: int, rounds: int = 9) -> dict:
         raise RuntimeError("the MAVLink receiver did not start")
     fusion = _filter()
     R_map_cam = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
-    spent: dict[str, list[np.ndarray]] = {"vision": [], "odometry": []}
+    options = {m: SimpleNamespace(map_frame="nwu", mavlink_message=m) for m in ("vision", "odometry")}
+    spent: dict[str, list[np.ndarray]] = {m: [] for m in options}
     with MavlinkSink(f"udpout:127.0.0.1:{port}") as link:
-        for message in spent:  # warm: the first calls import and allocate
+        for args in options.values():  # warm: the first calls import and allocate
             for k in range(50):
-                _send_fix(link, SimpleNamespace(map_frame="nwu", mavlink_message=message), fusion, R_map_cam, k / 30)
+                _send_fix(link, args, fusion, R_map_cam, k / 30)
         for r in range(rounds):
-            for message in (list(spent) if r % 2 == 0 else list(spent)[::-1]):
-                args = SimpleNamespace(map_frame="nwu", mavlink_message=message)
+            for message in (list(options) if r % 2 == 0 else list(options)[::-1]):
+                args = options[message]
                 steady().wait()
                 times = np.empty(n)
                 for k in range(n):

@@ -14,6 +14,7 @@ import importlib
 import os
 import sys
 from collections.abc import Sequence
+from functools import lru_cache
 from pathlib import Path
 from typing import NoReturn
 
@@ -549,17 +550,12 @@ def check_outputs(args: argparse.Namespace) -> None:
             raise UsageError(f"{what}: cannot write there ({near} is not writable)")
 
 
-_PARSER: argparse.ArgumentParser | None = None
-
-
+@lru_cache(maxsize=1)
 def _shared_parser() -> argparse.ArgumentParser:
     """The process's one parser, built at the first call. Building it takes about 10 ms: most
     of a ``visloc batch`` task on a short recording, where :func:`main` runs once per task in
     the same worker process. Parsing does not change the parser, so one serves every call."""
-    global _PARSER
-    if _PARSER is None:
-        _PARSER = build_parser()
-    return _PARSER
+    return build_parser()
 
 
 def main(argv: Sequence[str] | None = None) -> int:

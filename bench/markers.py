@@ -14,7 +14,8 @@ with default parameters and with ``CORNER_REFINE_SUBPIX``; AprilTag 3 (pupil-apr
 Poses: visloc's own; OpenCV ``solvePnP(IPPE_SQUARE)`` on its SUBPIX corners (and AprilTag's),
 all with the frame's true intrinsics and distortion.
 
-Timing is interleaved (every frame: each detector in turn, several rounds); each frame's time
+Timing is interleaved (every frame: each detector in turn, several rounds, every table's
+round 1 before any table's round 2, so a frame's rounds lie minutes apart); each frame's time
 is its best over the rounds, and the tables give the median over the frames and ratios to
 OpenCV's default detector. Every quarter second the timing waits until the host runs at its
 normal speed (``_timing.Steady``: the host has slow spells of a few seconds).
@@ -133,28 +134,45 @@ def pose_of(method: str, corners, camera: Camera):
     return cv2.Rodrigues(rvec)[0], tvec.ravel()
 
 
-def run_rendered(size, methods, rounds, dict_name, sets, seed0, camera=True):
-    scenes = []
-    for name, n in sets.items():
-        for i in range(n):
-            sc = random_scene(np.random.default_rng([seed0, size[0], list(SETS).index(name), i]), size=size,
-                              dictionary=dict_name, difficulty=name, camera=camera)
-            scenes.append((name, sc))
-    times = {m: [] for m in methods}
-    outputs = {m: [None] * len(scenes) for m in methods}
+def time_sections(sections: list[tuple[list, dict]], rounds: int) -> list[tuple[dict, dict]]:
+    """Time every section's items with each of its methods, interleaved, the rounds spread over
+    all the sections: round 1 of every section, then round 2 of every section, ... so an item's
+    rounds lie minutes apart and a slow spell of the host as long as one section (the 36h11
+    table once ran 23 % slow while the tables around it did not) moves at most one of them.
+
+    ``sections``: (items, {method: function(item) -> output, or (output, seconds the peer
+    measured itself)}). Returns, per section, ({method: each item's best time over the rounds,
+    s (items,)}, {method: each item's output of the first round}).
+    """
+    times = [{m: [] for m in run} for _, run in sections]
+    outputs = [{m: [None] * len(items) for m in run} for items, run in sections]
     for r in range(rounds):
-        for k, (_, sc) in enumerate(scenes):
-            steady().wait(every=0.25)
-            order = list(methods) if (r + k) % 2 == 0 else list(methods)[::-1]
-            for m in order:
-                t0 = time.perf_counter()
-                out = methods[m](sc.image)
-                spent = time.perf_counter() - t0
-                if isinstance(out, tuple):  # a peer in a child process timed itself
-                    out, spent = out
-                times[m].append(spent)
-                if r == 0:
-                    outputs[m][k] = out
+        for s, (items, run) in enumerate(sections):
+            for k, item in enumerate(items):
+                steady().wait(every=0.25)
+                for m in list(run) if (r + k) % 2 == 0 else list(run)[::-1]:
+                    t0 = time.perf_counter()
+                    out = run[m](item)
+                    spent = time.perf_counter() - t0
+                    if isinstance(out, tuple):  # a peer in a child process timed itself
+                        out, spent = out
+                    times[s][m].append(spent)
+                    if r == 0:
+                        outputs[s][m][k] = out
+    return [({m: best_per_item(t, rounds) for m, t in tm.items()}, out) for tm, out in zip(times, outputs)]
+
+
+def rendered_scenes(size, dict_name, sets, seed0, camera=True) -> list:
+    """The (set name, :class:`visloc.synth.Scene`) frames of one rendered table."""
+    return [(name, random_scene(np.random.default_rng([seed0, size[0], list(SETS).index(name), i]), size=size,
+                                dictionary=dict_name, difficulty=name, camera=camera))
+            for name, n in sets.items() for i in range(n)]
+
+
+def score_rendered(scenes, sets, best, outputs) -> dict:
+    """One rendered table's statistics per method and set, from :func:`time_sections`' times
+    and outputs for ``scenes`` (:func:`rendered_scenes`)."""
+    methods = list(best)
     matched = {m: [match(outputs[m][k], [t for t in sc.markers if t.visible]) for k, (_, sc) in enumerate(scenes)]
                for m in methods}
     # the markers every method of the table found, per frame: corner errors on the same markers
@@ -204,8 +222,7 @@ def run_rendered(size, methods, rounds, dict_name, sets, seed0, camera=True):
                 "trans_err_median_pct": float(100 * np.median(trans)) if trans else None,
                 "flip_rate": flips / len(rot) if rot else None,
             }
-        best = best_per_item(times[m], rounds)
-        stats[m] = {"ms_median": 1e3 * float(np.median(best)), "ms_mean": 1e3 * float(np.mean(best)),
+        stats[m] = {"ms_median": 1e3 * float(np.median(best[m])), "ms_mean": 1e3 * float(np.mean(best[m])),
                     "sets": per_set}
     return stats
 
@@ -214,34 +231,30 @@ BOARD_SETS = {"camera-like easy": ("easy", True), "camera-like hard": ("hard", T
               "linear sharp": ("easy", False), "linear hard": ("hard", False)}
 
 
-def run_boards(rounds: int, n: int, seed0: int = 9) -> dict:
+def board_section(n: int, seed0: int = 9) -> tuple[list, dict]:
     """AprilGrid-style boards (tags touching the grid's corner squares, Kalibr's layout;
-    :func:`visloc.synth.random_board_scene`), 640x480: recall (right id, every corner within
-    3 px of the truth), corner RMS and ms per frame (each frame's best of the rounds, the median
-    over the frames), interleaved. ``visloc_boards`` is
-    ``MarkerDetector(..., erode=2)`` (stage 3b); visloc reads the linear renders with
-    ``response="linear"``."""
+    :func:`visloc.synth.random_board_scene`), 640x480, ``n`` per set of :data:`BOARD_SETS`:
+    the (set name, scene) frames and the methods, for :func:`time_sections` (items: (image,
+    camera-like?)). ``visloc_boards`` is ``MarkerDetector(..., erode=2)`` (stage 3b); visloc
+    reads the linear renders with ``response="linear"``."""
     frames = [(name, random_board_scene(np.random.default_rng([seed0, k, i]), difficulty=diff, camera=cam))
               for k, (name, (diff, cam)) in enumerate(BOARD_SETS.items()) for i in range(n)]
     methods = {(m, cam): MarkerDetector("DICT_APRILTAG_36h11", erode=e, response="srgb" if cam else "linear")
                for m, e in (("visloc", 0), ("visloc_boards", 2)) for cam in (True, False)}
     cv_det = opencv_detector("DICT_APRILTAG_36h11", False)
-    run = {m: (lambda img, cam, m=m: [(x.id, x.corners) for x in methods[m, cam].detect(img)])
+    run = {m: (lambda item, m=m: [(x.id, x.corners) for x in methods[m, item[1]].detect(item[0])])
            for m in ("visloc", "visloc_boards")}
-    run["opencv"] = lambda img, cam: [] if (r := cv_det.detectMarkers(img))[1] is None else [
+    run["opencv"] = lambda item: [] if (r := cv_det.detectMarkers(item[0]))[1] is None else [
         (int(i), c.reshape(4, 2).astype(np.float64)) for c, i in zip(r[0], r[1].ravel())]
-    times = {m: [] for m in run}
-    out = {m: [None] * len(frames) for m in run}
-    for r in range(rounds):
-        for k, (name, sc) in enumerate(frames):
-            steady().wait(every=0.25)
-            for m in (list(run) if (r + k) % 2 == 0 else list(run)[::-1]):
-                t0 = time.perf_counter()
-                dets = run[m](sc.image, BOARD_SETS[name][1])
-                times[m].append(time.perf_counter() - t0)
-                out[m][k] = dets
+    return frames, run
+
+
+def score_boards(frames, best, out) -> dict:
+    """The boards' recall (right id, every corner within 3 px of the truth), corner RMS and ms
+    per frame (each frame's best of the rounds, the median over the frames) per method, from
+    :func:`time_sections`' times and outputs for :func:`board_section`'s frames."""
     stats = {}
-    for m in run:
+    for m in best:
         per = {}
         for name in BOARD_SETS:
             found = total = 0
@@ -257,7 +270,7 @@ def run_boards(rounds: int, n: int, seed0: int = 9) -> dict:
                         errs.extend(np.sqrt(((c - truth[mid]) ** 2).sum(axis=1)))
             per[name] = {"found": found, "tags": total, "recall": found / total if total else None,
                          "corner_rms_px": float(np.sqrt(np.mean(np.square(errs)))) if errs else None}
-        stats[m] = {"ms_median": 1e3 * float(np.median(best_per_item(times[m], rounds))), "sets": per}
+        stats[m] = {"ms_median": 1e3 * float(np.median(best[m])), "sets": per}
     return stats
 
 
@@ -273,19 +286,19 @@ STAGES = {"blur": "2 blur", "threshold": "3 threshold", "find_candidates": "4-5 
           "cell_white_fractions": "9 area read (confidence)", "decode": "10 dictionary"}
 
 
-def stage_times(size, sets, seed0, rounds=STAGE_ROUNDS):
+def stage_times(sizes, sets, seed0, rounds=STAGE_ROUNDS) -> dict:
     """Where visloc's time goes: ms per frame in each stage function of the detector (wrapped
-    with a timer for this run only) over the same rendered frames as :func:`run_rendered`:
-    the split of the fastest of ``rounds`` passes through the frames (a slow spell of the host
-    moves one pass). All passes run on the calling thread here, so that the stage times
-    add up."""
+    with a timer for this run only) over the same rendered frames as :func:`rendered_scenes`,
+    per size ("WxH" keys): the split of the fastest of ``rounds`` passes through each size's
+    frames (a slow spell of the host moves one pass; the passes alternate between the sizes,
+    so one size's passes lie apart in time). All passes run on the calling thread here, so
+    that the stage times add up."""
     import visloc.markers.detector as det_mod
 
-    images = [random_scene(np.random.default_rng([seed0, size[0], list(SETS).index(name), i]), size=size,
-                           dictionary="DICT_4X4_50", difficulty=name, camera=True).image
-              for name, n in sets.items() for i in range(n)]
+    images = {f"{w}x{h}": [sc.image for _, sc in rendered_scenes((w, h), "DICT_4X4_50", sets, seed0)]
+              for w, h in sizes}
     spent = dict.fromkeys(STAGES, 0.0)
-    per_round, n = [], len(images)
+    passes = {key: [] for key in images}
     originals = {name: getattr(det_mod, name) for name in STAGES}
 
     def timed(name, fn):
@@ -304,22 +317,31 @@ def stage_times(size, sets, seed0, rounds=STAGE_ROUNDS):
         for name, fn in originals.items():
             setattr(det_mod, name, timed(name, fn))
         for _ in range(rounds):
-            spent.update(dict.fromkeys(STAGES, 0.0))
-            total = 0.0
-            for img in images:
-                steady().wait(every=0.25)
-                t0 = time.perf_counter()
-                vl.detect(img)
-                total += time.perf_counter() - t0
-            row = {STAGES[k]: 1e3 * v / n for k, v in spent.items()}
-            row["rest (Python glue, duplicates, results)"] = 1e3 * (total - sum(spent.values())) / n
-            row["total"] = 1e3 * total / n
-            per_round.append(row)
+            for key, frames in images.items():
+                passes[key].append(_stage_pass(vl, frames, spent))
     finally:
         det_mod._THREAD_MAX_PIXELS = threaded
         for name, fn in originals.items():
             setattr(det_mod, name, fn)
-    return min(per_round, key=lambda row: row["total"])  # the fastest pass, whole: its parts add up
+    # the fastest pass, whole: its parts add up
+    return {key: min(rows, key=lambda row: row["total"]) for key, rows in passes.items()}
+
+
+def _stage_pass(vl, frames, spent) -> dict:
+    """One pass of :func:`stage_times` through ``frames``: ms per frame per stage (``spent``,
+    filled by the stage timers) and in total."""
+    spent.update(dict.fromkeys(STAGES, 0.0))
+    total = 0.0
+    for img in frames:
+        steady().wait(every=0.25)
+        t0 = time.perf_counter()
+        vl.detect(img)
+        total += time.perf_counter() - t0
+    n = len(frames)
+    row = {STAGES[k]: 1e3 * v / n for k, v in spent.items()}
+    row["rest (Python glue, duplicates, results)"] = 1e3 * (total - sum(spent.values())) / n
+    row["total"] = 1e3 * total / n
+    return row
 
 
 def _plain(o):
@@ -381,23 +403,26 @@ def main(argv=None) -> int:
     result = {"machine": {"python": sys.version.split()[0], "opencv": cv2.__version__, "numpy": np.__version__,
                           "platform": platform.platform(), "cv_threads": cv2.getNumThreads()},
               "rounds": args.rounds, "sets": sets, "rendered": {}}
+    tables = {}  # key: (scenes, sets, methods)
     for size in sizes:
-        key = f"{size[0]}x{size[1]} DICT_4X4_50, camera-like"
-        print(f"rendered {key} ...", file=sys.stderr, flush=True)
-        result["rendered"][key] = run_rendered(size, make_methods("DICT_4X4_50", False), args.rounds, "DICT_4X4_50", sets, 1)
-    key = "640x480 DICT_APRILTAG_36h11, camera-like"
-    print(f"rendered {key} ...", file=sys.stderr, flush=True)
+        tables[f"{size[0]}x{size[1]} DICT_4X4_50, camera-like"] = (
+            rendered_scenes(size, "DICT_4X4_50", sets, 1), sets, make_methods("DICT_4X4_50", False))
     at_sets = {k: v for k, v in sets.items() if k in ("easy", "hard", "dark")}
-    result["rendered"][key] = run_rendered((640, 480), make_methods("DICT_APRILTAG_36h11", True), args.rounds,
-                                           "DICT_APRILTAG_36h11", at_sets, 2)
-    key = "640x480 DICT_4X4_50, linear renders (named case: no camera model)"
-    print(f"rendered {key} ...", file=sys.stderr, flush=True)
+    tables["640x480 DICT_APRILTAG_36h11, camera-like"] = (
+        rendered_scenes((640, 480), "DICT_APRILTAG_36h11", at_sets, 2), at_sets, make_methods("DICT_APRILTAG_36h11", True))
     lin_sets = {k: v for k, v in sets.items() if k in ("easy", "hard", "small")}
-    result["rendered"][key] = run_rendered((640, 480), make_methods("DICT_4X4_50", False, "linear"), args.rounds,
-                                           "DICT_4X4_50", lin_sets, 1, camera=False)
-    print("AprilGrid boards ...", file=sys.stderr, flush=True)
-    result["boards"] = run_boards(args.rounds, 4 if args.quick else 12)
-    result["stages"] = {f"{w}x{h}": stage_times((w, h), sets, 1) for w, h in sizes}
+    tables["640x480 DICT_4X4_50, linear renders (named case: no camera model)"] = (
+        rendered_scenes((640, 480), "DICT_4X4_50", lin_sets, 1, camera=False), lin_sets,
+        make_methods("DICT_4X4_50", False, "linear"))
+    boards, board_run = board_section(4 if args.quick else 12)
+    sections = [([sc.image for _, sc in scenes], methods) for scenes, _, methods in tables.values()]
+    sections.append(([(sc.image, BOARD_SETS[name][1]) for name, sc in boards], board_run))
+    print(f"timing {len(sections)} tables, {args.rounds} rounds ...", file=sys.stderr, flush=True)
+    timed = time_sections(sections, args.rounds)
+    for (key, (scenes, table_sets, _)), (best, outputs) in zip(tables.items(), timed):
+        result["rendered"][key] = score_rendered(scenes, table_sets, best, outputs)
+    result["boards"] = score_boards(boards, *timed[-1])
+    result["stages"] = stage_times(sizes, sets, 1)
     for at in _APRILTAG:
         at.close()
     result["steady"] = steady().summary()

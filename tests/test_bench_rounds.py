@@ -1,0 +1,71 @@
+"""``bench/markers.py``'s round order and ``bench/host_speed.py``'s windows."""
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+
+_BENCH = Path(__file__).resolve().parents[1] / "bench"
+
+
+def _load(name: str):
+    """A bench script as a module (its ``_timing``/``_results`` imports found in bench/)."""
+    sys.path.insert(0, str(_BENCH))
+    try:
+        spec = importlib.util.spec_from_file_location(f"bench_{name}", _BENCH / f"{name}.py")
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        return module
+    finally:
+        sys.path.remove(str(_BENCH))
+
+
+markers = _load("markers")
+host_speed = _load("host_speed")
+
+
+def test_time_sections_runs_every_sections_round_before_the_next_round_and_keeps_each_items_best():
+    calls = []
+    seconds = iter([0.5, 0.2, 0.9, 0.1, 0.4, 0.3, 0.7, 0.8])  # the self-timed peer's, call by call
+
+    def method(section, name, timed_itself=False):
+        def run(item):
+            calls.append((section, item, name))
+            return ([f"{name}:{item}"], next(seconds)) if timed_itself else [f"{name}:{item}"]
+        return run
+
+    sections = [(["a", "b"], {"m": method(0, "m"), "peer": method(0, "peer", True)}),
+                (["c", "d"], {"m": method(1, "m"), "peer": method(1, "peer", True)})]
+    (best0, out0), (best1, out1) = markers.time_sections(sections, rounds=2)
+    assert len(calls) == 16
+    first_round = calls[:8]
+    assert {(s, i) for s, i, _ in first_round} == {(0, "a"), (0, "b"), (1, "c"), (1, "d")}
+    assert [s for s, _, _ in calls] == [0, 0, 0, 0, 1, 1, 1, 1] * 2  # section 1's round 1 before section 0's round 2
+    # the peer's own times: round 1 gives a, b, c, d = 0.5, 0.2, 0.9, 0.1; round 2 = 0.4, 0.3, 0.7, 0.8
+    np.testing.assert_allclose(best0["peer"], [0.4, 0.2])
+    np.testing.assert_allclose(best1["peer"], [0.7, 0.1])
+    assert best0["m"].shape == (2,) and (best0["m"] > 0).all()
+    assert out0 == {"m": [["m:a"], ["m:b"]], "peer": [["peer:a"], ["peer:b"]]}
+    assert out1["peer"] == [["peer:c"], ["peer:d"]]
+
+
+def test_host_speed_windows_give_each_windows_fastest_relative_to_the_usual():
+    times = np.array([0.0, 1.0, 2.0, 10.0, 11.0, 20.0, 25.0])
+    ms = np.array([[1.0, 5.0], [2.0, 4.0], [3.0, 6.0],   # window 0: fastest 1, 4
+                   [1.5, 4.0], [2.0, 9.0],               # window 10: 1.5, 4
+                   [1.0, 8.0], [1.2, 8.0]])              # window 20: 1, 8
+    starts, usual, rel = host_speed.windows(times, ms, 10.0)
+    np.testing.assert_allclose(starts, [0, 10, 20])
+    np.testing.assert_allclose(usual, [np.percentile([1, 1.5, 1], 10), np.percentile([4, 4, 8], 10)])
+    np.testing.assert_allclose(rel, np.array([[1, 4], [1.5, 4], [1, 8]]) / usual)
+
+
+def test_host_speed_refuses_a_log_shorter_than_two_windows(capsys):
+    try:
+        host_speed.main(["--seconds", "5", "--window", "10"])
+    except SystemExit as e:
+        assert e.code == 2
+    else:
+        raise AssertionError("no error")
+    assert "at least two windows" in capsys.readouterr().err

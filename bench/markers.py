@@ -15,7 +15,7 @@ Poses: visloc's own; OpenCV ``solvePnP(IPPE_SQUARE)`` on its SUBPIX corners (and
 all with the frame's true intrinsics and distortion.
 
 Timing is interleaved (every frame: each detector in turn, several rounds, every table's
-round 1 before any table's round 2, so a frame's rounds lie minutes apart); each frame's time
+round 1 before any table's round 2, so a frame's rounds lie tens of seconds apart); each frame's time
 is its best over the rounds, and the tables give the median over the frames and ratios to
 OpenCV's default detector. Every quarter second the timing waits until the host runs at its
 normal speed (``_timing.Steady``: the host has slow spells of a few seconds).
@@ -137,7 +137,7 @@ def pose_of(method: str, corners, camera: Camera):
 def time_sections(sections: list[tuple[list, dict]], rounds: int) -> list[tuple[dict, dict]]:
     """Time every section's items with each of its methods, interleaved, the rounds spread over
     all the sections: round 1 of every section, then round 2 of every section, ... so an item's
-    rounds lie minutes apart and a slow spell of the host as long as one section (the 36h11
+    rounds lie tens of seconds apart and a slow spell of the host as long as one section (the 36h11
     table once ran 23 % slow while the tables around it did not) moves at most one of them.
 
     ``sections``: (items, {method: function(item) -> output, or (output, seconds the peer

@@ -110,7 +110,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  {len(rows)} samples", file=sys.stderr, flush=True)
     ms = np.array(rows)
     starts, usual, rel = windows(np.array(stamps), ms, args.window)
-    vis = rel[:, -1]
+    vis = rel[:, list(work).index("visloc detect")]
     summary = {name: {"usual_ms": float(usual[k]), "slow_windows": int((rel[:, k] > SLOW).sum()),
                       "slowest": float(rel[:, k].max()),
                       "corr_visloc": float(np.corrcoef(rel[:, k], vis)[0, 1]) if np.ptp(rel[:, k]) > 0 else None}

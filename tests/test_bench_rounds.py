@@ -5,6 +5,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 _BENCH = Path(__file__).resolve().parents[1] / "bench"
 
@@ -39,8 +40,7 @@ def test_time_sections_runs_every_sections_round_before_the_next_round_and_keeps
                 (["c", "d"], {"m": method(1, "m"), "peer": method(1, "peer", True)})]
     (best0, out0), (best1, out1) = markers.time_sections(sections, rounds=2)
     assert len(calls) == 16
-    first_round = calls[:8]
-    assert {(s, i) for s, i, _ in first_round} == {(0, "a"), (0, "b"), (1, "c"), (1, "d")}
+    assert {(s, i) for s, i, _ in calls[:8]} == {(0, "a"), (0, "b"), (1, "c"), (1, "d")}  # round 1: every item
     assert [s for s, _, _ in calls] == [0, 0, 0, 0, 1, 1, 1, 1] * 2  # section 1's round 1 before section 0's round 2
     # the peer's own times: round 1 gives a, b, c, d = 0.5, 0.2, 0.9, 0.1; round 2 = 0.4, 0.3, 0.7, 0.8
     np.testing.assert_allclose(best0["peer"], [0.4, 0.2])
@@ -62,10 +62,7 @@ def test_host_speed_windows_give_each_windows_fastest_relative_to_the_usual():
 
 
 def test_host_speed_refuses_a_log_shorter_than_two_windows(capsys):
-    try:
+    with pytest.raises(SystemExit) as e:
         host_speed.main(["--seconds", "5", "--window", "10"])
-    except SystemExit as e:
-        assert e.code == 2
-    else:
-        raise AssertionError("no error")
+    assert e.value.code == 2
     assert "at least two windows" in capsys.readouterr().err

@@ -18,7 +18,9 @@ Timing is interleaved (every frame: each detector in turn, several rounds, every
 round 1 before any table's round 2, so a frame's rounds lie tens of seconds apart); each frame's time
 is its best over the rounds, and the tables give the median over the frames and ratios to
 OpenCV's default detector. Every quarter second the timing waits until the host runs at its
-normal speed (``_timing.Steady``: the host has slow spells of a few seconds).
+normal speed (``_timing.Steady``: the host has slow spells of a few seconds). The split of
+visloc's time over its stages (:class:`StageSplit`) makes one pass through one size's frames
+after each table's round, so its passes too are spread over the whole timing.
 
 Usage::
 
@@ -34,6 +36,8 @@ import os
 import platform
 import sys
 import time
+from collections.abc import Callable
+from contextlib import contextmanager
 from pathlib import Path
 
 import cv2
@@ -134,15 +138,18 @@ def pose_of(method: str, corners, camera: Camera):
     return cv2.Rodrigues(rvec)[0], tvec.ravel()
 
 
-def time_sections(sections: list[tuple[list, dict]], rounds: int) -> list[tuple[dict, dict]]:
+def time_sections(sections: list[tuple[list, dict]], rounds: int,
+                  between: Callable[[], None] | None = None) -> list[tuple[dict, dict]]:
     """Time every section's items with each of its methods, interleaved, the rounds spread over
     all the sections: round 1 of every section, then round 2 of every section, ... so an item's
     rounds lie tens of seconds apart and a slow spell of the host as long as one section (the 36h11
     table once ran 23 % slow while the tables around it did not) moves at most one of them.
 
     ``sections``: (items, {method: function(item) -> output, or (output, seconds the peer
-    measured itself)}). Returns, per section, ({method: each item's best time over the rounds,
-    s (items,)}, {method: each item's output of the first round}).
+    measured itself)}). ``between``: called after every section's round (``rounds`` x sections
+    calls, spread over the whole timing; :meth:`StageSplit.run_pass`). Returns, per section,
+    ({method: each item's best time over the rounds, s (items,)}, {method: each item's output of
+    the first round}).
     """
     times = [{m: [] for m in run} for _, run in sections]
     outputs = [{m: [None] * len(items) for m in run} for items, run in sections]
@@ -159,6 +166,8 @@ def time_sections(sections: list[tuple[list, dict]], rounds: int) -> list[tuple[
                     times[s][m].append(spent)
                     if r == 0:
                         outputs[s][m][k] = out
+            if between is not None:
+                between()
     return [({m: best_per_item(t, rounds) for m, t in tm.items()}, out) for tm, out in zip(times, outputs)]
 
 
@@ -274,11 +283,7 @@ def score_boards(frames, best, out) -> dict:
     return stats
 
 
-#: passes of :func:`stage_times` through the frames (the fastest is kept; 3 moved its small
-#: stage times by 20-25 % from run to run)
-STAGE_ROUNDS = 7
-
-#: the detector's stage functions whose time :func:`stage_times` measures, in pipeline order
+#: the detector's stage functions whose time :class:`StageSplit` measures, in pipeline order
 STAGES = {"blur": "2 blur", "threshold": "3 threshold", "find_candidates": "4-5 contours + filter",
           "fit_quads": "6-7 corner split + line fits",
           "refine_quads": "8 edge refinement", "read_cells": "9 cells read (first look and stage 9)",
@@ -286,20 +291,15 @@ STAGES = {"blur": "2 blur", "threshold": "3 threshold", "find_candidates": "4-5 
           "cell_white_fractions": "9 area read (confidence)", "decode": "10 dictionary"}
 
 
-def stage_times(sizes, sets, seed0, rounds=STAGE_ROUNDS) -> dict:
-    """Where visloc's time goes: ms per frame in each stage function of the detector (wrapped
-    with a timer for this run only) over the same rendered frames as :func:`rendered_scenes`,
-    per size ("WxH" keys): the split of the fastest of ``rounds`` passes through each size's
-    frames (a slow spell of the host moves one pass; the passes alternate between the sizes,
-    so one size's passes lie apart in time). All passes run on the calling thread here, so
-    that the stage times add up."""
+@contextmanager
+def _stage_timers(spent: dict):
+    """Within the block, the detector's stage functions (:data:`STAGES`) add their time (s) to
+    ``spent`` and its search passes all run on the calling thread (so the stage times add up);
+    both undone on leaving."""
     import visloc.markers.detector as det_mod
 
-    images = {f"{w}x{h}": [sc.image for _, sc in rendered_scenes((w, h), "DICT_4X4_50", sets, seed0)]
-              for w, h in sizes}
-    spent = dict.fromkeys(STAGES, 0.0)
-    passes = {key: [] for key in images}
     originals = {name: getattr(det_mod, name) for name in STAGES}
+    threaded = det_mod._THREAD_MAX_PIXELS
 
     def timed(name, fn):
         def run(*a, **k):
@@ -310,25 +310,53 @@ def stage_times(sizes, sets, seed0, rounds=STAGE_ROUNDS) -> dict:
                 spent[name] += time.perf_counter() - t0
         return run
 
-    vl = MarkerDetector("DICT_4X4_50")
-    threaded = det_mod._THREAD_MAX_PIXELS
     try:
         det_mod._THREAD_MAX_PIXELS = 0
         for name, fn in originals.items():
             setattr(det_mod, name, timed(name, fn))
-        for _ in range(rounds):
-            for key, frames in images.items():
-                passes[key].append(_stage_pass(vl, frames, spent))
+        yield
     finally:
         det_mod._THREAD_MAX_PIXELS = threaded
         for name, fn in originals.items():
             setattr(det_mod, name, fn)
-    # the fastest pass, whole: its parts add up
-    return {key: min(rows, key=lambda row: row["total"]) for key, rows in passes.items()}
+
+
+class StageSplit:
+    """Where visloc's time goes: ms per frame in each stage function of the detector over the same
+    rendered frames as :func:`rendered_scenes`, per size ("WxH" keys).
+
+    Each :meth:`run_pass` makes one pass through the frames of the next size in turn (the stage
+    functions timed only during the pass, :func:`_stage_timers`). ``main`` runs one after every
+    table's round (:func:`time_sections`' ``between``: 3 rounds of the 6 tables give each of the 3
+    sizes 6 passes), so a size's passes lie spread over the whole timing rather than in a block
+    at its end (one run's stage split, timed in a block, came out 25 % slower than the tables
+    timed minutes before). :meth:`result` keeps each size's fastest pass, whole, so its parts add up.
+    """
+
+    def __init__(self, sizes, sets, seed0) -> None:
+        self.images = {f"{w}x{h}": [sc.image for _, sc in rendered_scenes((w, h), "DICT_4X4_50", sets, seed0)]
+                       for w, h in sizes}
+        self.passes: dict[str, list[dict]] = {key: [] for key in self.images}
+        self.spent = dict.fromkeys(STAGES, 0.0)
+        self.detector = MarkerDetector("DICT_4X4_50")
+        self._turn = 0
+
+    def run_pass(self) -> None:
+        """One pass through the next size's frames (sizes in turn)."""
+        key = list(self.images)[self._turn % len(self.images)]
+        self._turn += 1
+        with _stage_timers(self.spent):
+            self.passes[key].append(_stage_pass(self.detector, self.images[key], self.spent))
+
+    def result(self) -> dict:
+        """Per size with at least one pass, the stage split of its fastest pass (ms per frame per
+        stage, the rest and the total) and ``"passes"``, the count it is the fastest of."""
+        return {key: {**min(rows, key=lambda row: row["total"]), "passes": len(rows)}
+                for key, rows in self.passes.items() if rows}
 
 
 def _stage_pass(vl, frames, spent) -> dict:
-    """One pass of :func:`stage_times` through ``frames``: ms per frame per stage (``spent``,
+    """One pass of :class:`StageSplit` through ``frames``: ms per frame per stage (``spent``,
     filled by the stage timers) and in total."""
     spent.update(dict.fromkeys(STAGES, 0.0))
     total = 0.0
@@ -381,12 +409,14 @@ def markdown(result) -> str:
                              f"{fmt(r['corner_rms_px'])} |")
     if result.get("stages"):
         sizes = list(result["stages"])
+        counts = sorted({result["stages"][sz]["passes"] for sz in sizes})
         lines.append("\n**Where visloc's time goes** (ms per frame in each stage over the same camera-like "
-                     f"DICT_4X4_50 frames, the pass through them with the lowest total of {STAGE_ROUNDS}, every pass on one thread; "
-                     "the timers add a little)\n")
+                     f"DICT_4X4_50 frames, the pass through them with the lowest total of "
+                     f"{'-'.join(map(str, counts))}, the passes spread over the timing of the tables above, "
+                     "every pass on one thread; the timers add a little)\n")
         lines.append("| stage | " + " | ".join(sizes) + " |")
         lines.append("|---|" + "---|" * len(sizes))
-        for stage in result["stages"][sizes[0]]:
+        for stage in [k for k in result["stages"][sizes[0]] if k != "passes"]:
             lines.append(f"| {stage} | " + " | ".join(fmt(result["stages"][sz][stage], 2) for sz in sizes) + " |")
     return "\n".join(lines) + "\n"
 
@@ -417,12 +447,14 @@ def main(argv=None) -> int:
     boards, board_run = board_section(4 if args.quick else 12)
     sections = [([sc.image for _, sc in scenes], methods) for scenes, _, methods in tables.values()]
     sections.append(([(sc.image, BOARD_SETS[name][1]) for name, sc in boards], board_run))
-    print(f"timing {len(sections)} tables, {args.rounds} rounds ...", file=sys.stderr, flush=True)
-    timed = time_sections(sections, args.rounds)
+    split = StageSplit(sizes, sets, 1)
+    print(f"timing {len(sections)} tables, {args.rounds} rounds (a stage-split pass after each) ...",
+          file=sys.stderr, flush=True)
+    timed = time_sections(sections, args.rounds, between=split.run_pass)
     for (key, (scenes, table_sets, _)), (best, outputs) in zip(tables.items(), timed):
         result["rendered"][key] = score_rendered(scenes, table_sets, best, outputs)
     result["boards"] = score_boards(boards, *timed[-1])
-    result["stages"] = stage_times(sizes, sets, 1)
+    result["stages"] = split.result()
     for at in _APRILTAG:
         at.close()
     result["steady"] = steady().summary()

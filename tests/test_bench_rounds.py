@@ -1,4 +1,4 @@
-"""``bench/markers.py``'s round order and ``bench/host_speed.py``'s windows."""
+"""``bench/markers.py``'s round order and stage split, and ``bench/host_speed.py``'s windows."""
 
 import importlib.util
 import sys
@@ -48,6 +48,34 @@ def test_time_sections_runs_every_sections_round_before_the_next_round_and_keeps
     assert best0["m"].shape == (2,) and (best0["m"] > 0).all()
     assert out0 == {"m": [["m:a"], ["m:b"]], "peer": [["peer:a"], ["peer:b"]]}
     assert out1["peer"] == [["peer:c"], ["peer:d"]]
+
+
+def test_time_sections_calls_between_after_every_sections_round():
+    calls = []
+    sections = [(["a"], {"m": lambda item: calls.append(("time", item))}),
+                (["b"], {"m": lambda item: calls.append(("time", item))})]
+    markers.time_sections(sections, rounds=2, between=lambda: calls.append(("between", None)))
+    assert calls == [("time", "a"), ("between", None), ("time", "b"), ("between", None)] * 2
+
+
+def test_stage_split_passes_take_the_sizes_in_turn_and_leave_the_detector_as_it_was():
+    import visloc.markers.detector as det_mod
+
+    before = {name: getattr(det_mod, name) for name in markers.STAGES}
+    threaded = det_mod._THREAD_MAX_PIXELS
+    split = markers.StageSplit([(160, 120), (200, 150)], {"easy": 1}, seed0=1)
+    for _ in range(3):
+        split.run_pass()
+    assert [len(split.passes[k]) for k in ("160x120", "200x150")] == [2, 1]
+    assert {name: getattr(det_mod, name) for name in markers.STAGES} == before
+    assert det_mod._THREAD_MAX_PIXELS == threaded
+    result = split.result()
+    assert result["160x120"]["passes"] == 2 and result["200x150"]["passes"] == 1
+    row = result["160x120"]
+    assert row["total"] == min(r["total"] for r in split.passes["160x120"])
+    assert row["2 blur"] > 0 and row["4-5 contours + filter"] > 0  # the timers ran during the passes
+    parts = sum(v for k, v in row.items() if k not in ("total", "passes"))
+    assert parts == pytest.approx(row["total"])
 
 
 def test_host_speed_windows_give_each_windows_fastest_relative_to_the_usual():

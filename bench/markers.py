@@ -329,8 +329,8 @@ class StageSplit:
     functions timed only during the pass, :func:`_stage_timers`). ``main`` runs one after every
     table's round (:func:`time_sections`' ``between``: 3 rounds of the 6 tables give each of the 3
     sizes 6 passes), so a size's passes lie spread over the whole timing rather than in a block
-    at its end (one run's stage split, timed in a block, came out 25 % slower than the tables
-    timed minutes before). :meth:`result` keeps each size's fastest pass, whole, so its parts add up.
+    at its end (timed so on 2026-12-07, one run's split came out 26-28 % slower than the run
+    before's while its tables came out 15-20 % faster). :meth:`result` keeps each size's fastest pass, whole, so its parts add up.
     """
 
     def __init__(self, sizes, sets, seed0) -> None:

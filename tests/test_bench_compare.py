@@ -60,7 +60,11 @@ def test_host_reference_is_printed_where_both_runs_record_it(tmp_path, capsys):
         _write(folder, "x", "| a | 1 |\n")
         (folder / "x.json").write_text(json.dumps({"steady": {"reference_ms_normal": ref}}))
     assert compare.main([str(old), str(new)]) == 0
-    assert "host reference workload: 0.300 -> 0.450 ms" in capsys.readouterr().out
+    assert "host reference workload: 0.300 -> 0.450 ms)" in capsys.readouterr().out
+    for folder, waits in ((old, 4), (new, 29)):
+        (folder / "x.json").write_text(json.dumps({"steady": {"reference_ms_normal": 0.4, "checks": 40, "waits": waits}}))
+    assert compare.main([str(old), str(new)]) == 0
+    assert "(host reference workload: 0.400 -> 0.400 ms; waited at 4/40 -> 29/40 checks)" in capsys.readouterr().out
     (new / "x.json").write_text("{}")  # no record: nothing printed
     assert compare.main([str(old), str(new)]) == 0
     assert "host reference" not in capsys.readouterr().out

@@ -330,7 +330,8 @@ class StageSplit:
     table's round (:func:`time_sections`' ``between``: 3 rounds of the 6 tables give each of the 3
     sizes 6 passes), so a size's passes lie spread over the whole timing rather than in a block
     at its end (timed so on 2026-12-07, one run's split came out 26-28 % slower than the run
-    before's while its tables came out 15-20 % faster). :meth:`result` keeps each size's fastest pass, whole, so its parts add up.
+    before's while its tables came out 15-20 % faster). :meth:`result` keeps each size's fastest
+    pass, whole, so its parts add up.
     """
 
     def __init__(self, sizes, sets, seed0) -> None:

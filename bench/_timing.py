@@ -44,6 +44,7 @@ import json
 import tempfile
 import time
 from collections import deque
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -166,3 +167,38 @@ def steady() -> Steady:
     if _SHARED is None:
         _SHARED = Steady(store=STORE)
     return _SHARED
+
+
+def time_sections(sections: list[tuple[list, dict]], rounds: int,
+                  between: Callable[[], None] | None = None) -> list[tuple[dict, dict]]:
+    """Time every section's items with each of its methods, interleaved, the rounds spread over
+    all the sections: round 1 of every section, then round 2 of every section, ... so an item's
+    rounds lie tens of seconds apart and a slow spell of the host as long as one section (a
+    markers table once ran 23 % slow while the tables around it did not) moves at most one of
+    them. Every item waits for the host (:func:`steady`, at most one check per 0.25 s); its
+    methods run in turn, in reverse order every other item and round.
+
+    ``sections``: (items, {method: function(item) -> output, or a tuple (output, seconds the
+    peer measured itself): so a method's own output must not be a tuple}). ``between``: called
+    after every section's round (``rounds`` x sections calls, spread over the whole timing;
+    ``markers.StageSplit.run_pass``). Returns, per section, ({method: each item's best time over
+    the rounds, s (items,)}, {method: each item's output of the first round}).
+    """
+    times = [{m: [] for m in run} for _, run in sections]
+    outputs = [{m: [None] * len(items) for m in run} for items, run in sections]
+    for r in range(rounds):
+        for s, (items, run) in enumerate(sections):
+            for k, item in enumerate(items):
+                steady().wait(every=0.25)
+                for m in list(run) if (r + k) % 2 == 0 else list(run)[::-1]:
+                    t0 = time.perf_counter()
+                    out = run[m](item)
+                    spent = time.perf_counter() - t0
+                    if isinstance(out, tuple):  # a peer in a child process timed itself
+                        out, spent = out
+                    times[s][m].append(spent)
+                    if r == 0:
+                        outputs[s][m][k] = out
+            if between is not None:
+                between()
+    return [({m: best_per_item(t, rounds) for m, t in tm.items()}, out) for tm, out in zip(times, outputs)]

@@ -26,7 +26,9 @@ with every other frame exposed 20 % more (auto exposure stepping); slow flight (
 at 1.5-2.5 m: the image moves less than a pixel per frame, the hover regime); and a moving
 shadow (a soft band of 40 % less light drifting 0.5 px per frame over the ground). Each pair's
 velocity is scaled by the height when its second frame was taken (``ground_velocity``'s
-convention). Timing is interleaved per pair (each method in turn, several rounds) and covers
+convention). Timing is interleaved per pair (each method in turn, several rounds, every set's
+round 1 before any set's round 2, so a pair's rounds lie a minute or more apart and a slow spell
+of the host as long as one set moves at most one of them: ``_timing.time_sections``) and covers
 image motion plus velocity; each pair's time is its best over the rounds, ``ms/pair`` the
 median over the pairs; every quarter second the timing waits until the host runs at its
 normal speed (``_timing.Steady``: the host has slow spells of a few seconds). Usage:
@@ -39,14 +41,13 @@ from __future__ import annotations
 import argparse
 import platform
 import sys
-import time
 from dataclasses import replace
 from pathlib import Path
 
 import cv2
 import numpy as np
 from _results import fmt, write_results
-from _timing import best_per_item, steady
+from _timing import steady, time_sections
 
 from visloc.flow import EgoMotion, block_flow, global_motion, ground_velocity
 from visloc.flow.direct import refine_motion
@@ -182,8 +183,10 @@ def _frames(fl, camera, exposure_step, seed, shadow=False):
     return out
 
 
-def run(size, n_flights, seconds, rounds, seed0, camera=None, exposure_step=False, slow=False, shadow=False):
-    methods = make_methods(size)
+def flow_pairs(size, n_flights, seconds, seed0, camera=None, exposure_step=False, slow=False, shadow=False) -> list:
+    """One set's frame pairs: per consecutive pair of frames of ``n_flights`` rendered flights,
+    (first frame, second frame, :class:`Camera`, the height when the second frame was taken, the
+    true velocity, the true yaw rate)."""
     pairs = []
     for i in range(n_flights):
         speed, heights = ((0.3, (1.5, 2.5)) if slow else (2.0, (0.5, 2.5)))  # slow: under 1 px per frame
@@ -198,32 +201,38 @@ def run(size, n_flights, seconds, rounds, seed0, camera=None, exposure_step=Fals
             # visloc flow reads it: the newest frame's)
             pairs.append((frames[k - 1], frames[k], cam, float(tr.position[k, 2]),
                           tr.pair_v[k], float(tr.pair_yaw_rate[k])))
-    times = {m: [] for m in methods}
-    results = {m: [None] * len(pairs) for m in methods}
-    for r in range(rounds):
-        for j, (a, b, cam, hgt, _, _) in enumerate(pairs):
-            steady().wait(every=0.25)
-            order = list(methods) if (r + j) % 2 == 0 else list(methods)[::-1]
-            for m in order:
-                t0 = time.perf_counter()
-                motion, fld = methods[m](a, b)
-                gv = ground_velocity(motion, cam, hgt, 1 / 60.0, field=fld)
-                times[m].append(time.perf_counter() - t0)
-                if r == 0:
-                    results[m][j] = gv
+    return pairs
+
+
+def pair_methods(size) -> dict:
+    """name -> function(pair of :func:`flow_pairs`) -> :class:`GroundVelocity`: each method's
+    image motion (:func:`make_methods`, one set's own instances: the streams keep their state
+    within the set) turned into a velocity by ``ground_velocity``, the work the timing covers."""
+
+    def with_velocity(motion_of):
+        def run(pair):
+            a, b, cam, height = pair[:4]
+            motion, field = motion_of(a, b)
+            return ground_velocity(motion, cam, height, 1 / 60.0, field=field)
+        return run
+
+    return {m: with_velocity(fn) for m, fn in make_methods(size).items()}
+
+
+def score(pairs, best, results) -> dict:
+    """One set's statistics per method from :func:`time_sections`' best times (s per pair) and
+    first-round velocities for ``pairs`` (:func:`flow_pairs`)."""
+    speed = np.array([np.linalg.norm(p[4]) for p in pairs])
     stats = {}
-    for m in methods:
+    for m in results:
         abs_err = np.array([np.linalg.norm(gv.v - p[4]) for gv, p in zip(results[m], pairs, strict=True)])
-        speed = np.array([np.linalg.norm(p[4]) for p in pairs])
         rel = abs_err / np.maximum(speed, 0.05)
         yaw = np.array([abs(gv.yaw_rate - p[5]) for gv, p in zip(results[m], pairs, strict=True)])
-        best = best_per_item(times[m], rounds)
-        stats[m] = {"ms_median": 1e3 * float(np.median(best)), "abs_err_median": float(np.median(abs_err)),
+        stats[m] = {"ms_median": 1e3 * float(np.median(best[m])), "abs_err_median": float(np.median(abs_err)),
                     "abs_err_p90": float(np.percentile(abs_err, 90)), "rel_err_median": float(np.median(rel)),
                     "rel_err_p90": float(np.percentile(rel, 90)), "yaw_rate_err_median": float(np.median(yaw)),
                     "yaw_rate_err_p90": float(np.percentile(yaw, 90))}
-    speeds = np.array([np.linalg.norm(p[4]) for p in pairs])
-    return {"pairs": len(pairs), "speed_m_s_p10_p50_p90": np.percentile(speeds, [10, 50, 90]).round(2).tolist(),
+    return {"pairs": len(pairs), "speed_m_s_p10_p50_p90": np.percentile(speed, [10, 50, 90]).round(2).tolist(),
             "heights_m_min_max": [float(min(p[3] for p in pairs)), float(max(p[3] for p in pairs))],
             "yaw_rate_abs_p90": float(np.percentile([abs(p[5]) for p in pairs], 90)), "methods": stats}
 
@@ -277,14 +286,19 @@ def main(argv=None) -> int:
             ((320, 240), FLOW_CAMERA, False, False, False), ((640, 480), FLOW_CAMERA, False, False, False),
             ((320, 240), FLOW_CAMERA, True, False, False),
             ((320, 240), FLOW_CAMERA, False, True, False), ((320, 240), FLOW_CAMERA, False, False, True)]
+    sections, keys = [], []
     for size, camera, step, slow, shadow in sets:
-        key = f"{size[0]}x{size[1]}" + ("" if camera is None else ", camera-like") + (
+        keys.append(f"{size[0]}x{size[1]}" + ("" if camera is None else ", camera-like") + (
             ", +20 % exposure every other frame" if step else "") + (
             ", slow flight (under 0.3 m/s at 1.5-2.5 m: under a pixel per frame)" if slow else "") + (
             f", a moving shadow ({100 * SHADOW_DEPTH:.0f} % less light in a band drifting {SHADOW_SPEED} px per frame)"
-            if shadow else "")
-        print(f"flow {key} ...", file=sys.stderr, flush=True)
-        res = run(size, n_flights, seconds, args.rounds, 10, camera, step, slow, shadow)
+            if shadow else ""))
+        print(f"flow {keys[-1]}: rendering ...", file=sys.stderr, flush=True)
+        sections.append((flow_pairs(size, n_flights, seconds, 10, camera, step, slow, shadow), pair_methods(size)))
+    print(f"timing {len(sections)} sets, {args.rounds} rounds ...", file=sys.stderr, flush=True)
+    timed = time_sections(sections, args.rounds)
+    for key, (size, *_), (pairs, _), (best, results) in zip(keys, sets, sections, timed, strict=True):
+        res = score(pairs, best, results)
         res["still"] = still_frames(size)
         result["sizes"][key] = res
     result["steady"] = steady().summary()

@@ -36,7 +36,6 @@ import os
 import platform
 import sys
 import time
-from collections.abc import Callable
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -44,7 +43,7 @@ import cv2
 import numpy as np
 from _peers import AprilTagProcess
 from _results import fmt, write_results
-from _timing import best_per_item, steady
+from _timing import steady, time_sections
 
 from visloc.markers import FAST_PASSES, MarkerDetector
 from visloc.pose import Camera, estimate_marker_pose, rotation_angle
@@ -136,39 +135,6 @@ def pose_of(method: str, corners, camera: Camera):
     if not ok:
         return None
     return cv2.Rodrigues(rvec)[0], tvec.ravel()
-
-
-def time_sections(sections: list[tuple[list, dict]], rounds: int,
-                  between: Callable[[], None] | None = None) -> list[tuple[dict, dict]]:
-    """Time every section's items with each of its methods, interleaved, the rounds spread over
-    all the sections: round 1 of every section, then round 2 of every section, ... so an item's
-    rounds lie tens of seconds apart and a slow spell of the host as long as one section (the 36h11
-    table once ran 23 % slow while the tables around it did not) moves at most one of them.
-
-    ``sections``: (items, {method: function(item) -> output, or (output, seconds the peer
-    measured itself)}). ``between``: called after every section's round (``rounds`` x sections
-    calls, spread over the whole timing; :meth:`StageSplit.run_pass`). Returns, per section,
-    ({method: each item's best time over the rounds, s (items,)}, {method: each item's output of
-    the first round}).
-    """
-    times = [{m: [] for m in run} for _, run in sections]
-    outputs = [{m: [None] * len(items) for m in run} for items, run in sections]
-    for r in range(rounds):
-        for s, (items, run) in enumerate(sections):
-            for k, item in enumerate(items):
-                steady().wait(every=0.25)
-                for m in list(run) if (r + k) % 2 == 0 else list(run)[::-1]:
-                    t0 = time.perf_counter()
-                    out = run[m](item)
-                    spent = time.perf_counter() - t0
-                    if isinstance(out, tuple):  # a peer in a child process timed itself
-                        out, spent = out
-                    times[s][m].append(spent)
-                    if r == 0:
-                        outputs[s][m][k] = out
-            if between is not None:
-                between()
-    return [({m: best_per_item(t, rounds) for m, t in tm.items()}, out) for tm, out in zip(times, outputs)]
 
 
 def rendered_scenes(size, dict_name, sets, seed0, camera=True) -> list:

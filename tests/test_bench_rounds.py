@@ -1,4 +1,4 @@
-"""``bench/markers.py``'s round order and stage split, and ``bench/host_speed.py``'s windows."""
+"""``bench/_timing.py``'s round order, ``bench/markers.py``'s stage split and ``bench/host_speed.py``'s windows."""
 
 import importlib.util
 import sys
@@ -23,6 +23,7 @@ def _load(name: str):
 
 
 markers = _load("markers")
+timing = _load("_timing")
 host_speed = _load("host_speed")
 
 
@@ -38,7 +39,7 @@ def test_time_sections_runs_every_sections_round_before_the_next_round_and_keeps
 
     sections = [(["a", "b"], {"m": method(0, "m"), "peer": method(0, "peer", True)}),
                 (["c", "d"], {"m": method(1, "m"), "peer": method(1, "peer", True)})]
-    (best0, out0), (best1, out1) = markers.time_sections(sections, rounds=2)
+    (best0, out0), (best1, out1) = timing.time_sections(sections, rounds=2)
     assert len(calls) == 16
     assert {(s, i) for s, i, _ in calls[:8]} == {(0, "a"), (0, "b"), (1, "c"), (1, "d")}  # round 1: every item
     assert [s for s, _, _ in calls] == [0, 0, 0, 0, 1, 1, 1, 1] * 2  # section 1's round 1 before section 0's round 2
@@ -54,7 +55,7 @@ def test_time_sections_calls_between_after_every_sections_round():
     calls = []
     sections = [(["a"], {"m": lambda item: calls.append(("time", item))}),
                 (["b"], {"m": lambda item: calls.append(("time", item))})]
-    markers.time_sections(sections, rounds=2, between=lambda: calls.append(("between", None)))
+    timing.time_sections(sections, rounds=2, between=lambda: calls.append(("between", None)))
     assert calls == [("time", "a"), ("between", None), ("time", "b"), ("between", None)] * 2
 
 

@@ -92,9 +92,10 @@ def run(frames: int, recordings: int, rounds: int, work: Path) -> dict:
 def task_overhead(work: Path, tasks: int = 30, rounds: int = 9, lengths: tuple[int, int] = (2, 20)) -> dict:
     """Milliseconds per task beyond its frames: ``tasks`` copies of a short and of a longer
     video (``lengths`` frames) through ``run_batch`` on one warm local worker, the two lengths
-    alternating over ``rounds`` rounds. From the fastest round of each length, the wall time per task is a straight line in
-    the frames per task: its slope is the time per frame in a worker (reading and detection), its
-    intercept the fixed cost of a task (scheduling, opening the video, writing the output)."""
+    alternating over ``rounds`` rounds. From the fastest round of each length, the wall time per
+    task is a straight line in the frames per task: its slope is the time per frame in a worker
+    (reading and detection), its intercept the fixed cost of a task (scheduling, opening the
+    video, writing the output)."""
     from dask.distributed import LocalCluster
 
     from visloc.batch import run_batch

@@ -8,9 +8,10 @@ Numbers are matched by position: the same file, line and cell (table rows) or th
 order (prose lines). A pair counts as different when it differs by more than ``--tol`` of the
 larger and by more than one unit of the last digit printed (0.43 against 0.44 is rounding, not a
 change). Files whose tables changed shape are named and skipped. Where both runs' JSON record
-the host's normal reference time and how often the timing waited for the host (``bench/_timing.py``),
-they are printed beside the file's count: a timing that moved with them moved with the host. Exit status 0 when every number is within the
-tolerance, 1 when one is not, 2 on bad input.
+the host's normal reference time and how often the timing waited for the host
+(``bench/_timing.py``), they are printed beside the file's count: a timing that moved with them
+moved with the host. Exit status 0 when every number is within the tolerance, 1 when one is
+not, 2 on bad input.
 """
 
 from __future__ import annotations
@@ -72,14 +73,14 @@ def host_reference(old: Path, new: Path) -> str:
     even where its normal reference time hardly moves (2026-12-07: real photos, flow and
     localize 20-45 % slower than their tables waited at 63, 24 and 23 % of their checks, the
     tables' runs at 11, 2 and 9 %); compare the share within a bench, not across benches."""
-    steady = []
+    steady, refs = [], []
     for path in (old, new):
         try:
             steady.append(json.loads(path.read_text())["steady"])
-            float(steady[-1]["reference_ms_normal"])
+            refs.append(float(steady[-1]["reference_ms_normal"]))
         except (OSError, ValueError, KeyError, TypeError):
             return ""
-    text = f" (host reference workload: {steady[0]['reference_ms_normal']:.3f} -> {steady[1]['reference_ms_normal']:.3f} ms"
+    text = f" (host reference workload: {refs[0]:.3f} -> {refs[1]:.3f} ms"
     if all(isinstance(s.get("checks"), int) and isinstance(s.get("waits"), int) for s in steady):
         text += "; waited at " + " -> ".join(f"{s['waits']}/{s['checks']}" for s in steady) + " checks"
     return text + ")"

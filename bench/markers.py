@@ -32,6 +32,7 @@ Writes ``markers.json`` and ``markers.md`` (the table the README shows).
 from __future__ import annotations
 
 import argparse
+import itertools
 import os
 import platform
 import sys
@@ -258,12 +259,13 @@ STAGES = {"blur": "2 blur", "threshold": "3 threshold", "find_candidates": "4-5 
 
 
 @contextmanager
-def _stage_timers(spent: dict):
+def _stage_timers():
     """Within the block, the detector's stage functions (:data:`STAGES`) add their time (s) to
-    ``spent`` and its search passes all run on the calling thread (so the stage times add up);
-    both undone on leaving."""
+    the dict the block gets (stage function name -> s, from 0) and its search passes all run on
+    the calling thread (so the stage times add up); both undone on leaving."""
     import visloc.markers.detector as det_mod
 
+    spent = dict.fromkeys(STAGES, 0.0)
     originals = {name: getattr(det_mod, name) for name in STAGES}
     threaded = det_mod._THREAD_MAX_PIXELS
 
@@ -280,7 +282,7 @@ def _stage_timers(spent: dict):
         det_mod._THREAD_MAX_PIXELS = 0
         for name, fn in originals.items():
             setattr(det_mod, name, timed(name, fn))
-        yield
+        yield spent
     finally:
         det_mod._THREAD_MAX_PIXELS = threaded
         for name, fn in originals.items():
@@ -288,8 +290,9 @@ def _stage_timers(spent: dict):
 
 
 class StageSplit:
-    """Where visloc's time goes: ms per frame in each stage function of the detector over the same
-    rendered frames as :func:`rendered_scenes`, per size ("WxH" keys).
+    """Where visloc's time goes: ms per frame in each stage function of the detector over
+    ``images`` ({"WxH": the frames of that size}: ``main`` gives the camera-like DICT_4X4_50
+    tables' own frames).
 
     Each :meth:`run_pass` makes one pass through the frames of the next size in turn (the stage
     functions timed only during the pass, :func:`_stage_timers`). ``main`` runs one after every
@@ -300,20 +303,17 @@ class StageSplit:
     pass, whole, so its parts add up.
     """
 
-    def __init__(self, sizes, sets, seed0) -> None:
-        self.images = {f"{w}x{h}": [sc.image for _, sc in rendered_scenes((w, h), "DICT_4X4_50", sets, seed0)]
-                       for w, h in sizes}
-        self.passes: dict[str, list[dict]] = {key: [] for key in self.images}
-        self.spent = dict.fromkeys(STAGES, 0.0)
+    def __init__(self, images: dict[str, list]) -> None:
+        self.images = images
+        self.passes: dict[str, list[dict]] = {key: [] for key in images}
         self.detector = MarkerDetector("DICT_4X4_50")
-        self._turn = 0
+        self._sizes = itertools.cycle(images)
 
     def run_pass(self) -> None:
         """One pass through the next size's frames (sizes in turn)."""
-        key = list(self.images)[self._turn % len(self.images)]
-        self._turn += 1
-        with _stage_timers(self.spent):
-            self.passes[key].append(_stage_pass(self.detector, self.images[key], self.spent))
+        key = next(self._sizes)
+        with _stage_timers() as spent:
+            self.passes[key].append(_stage_pass(self.detector, self.images[key], spent))
 
     def result(self) -> dict:
         """Per size with at least one pass, the stage split of its fastest pass (ms per frame per
@@ -324,8 +324,7 @@ class StageSplit:
 
 def _stage_pass(vl, frames, spent) -> dict:
     """One pass of :class:`StageSplit` through ``frames``: ms per frame per stage (``spent``,
-    filled by the stage timers) and in total."""
-    spent.update(dict.fromkeys(STAGES, 0.0))
+    filled by the stage timers, :func:`_stage_timers`) and in total."""
     total = 0.0
     for img in frames:
         steady().wait(every=0.25)
@@ -414,7 +413,8 @@ def main(argv=None) -> int:
     boards, board_run = board_section(4 if args.quick else 12)
     sections = [([sc.image for _, sc in scenes], methods) for scenes, _, methods in tables.values()]
     sections.append(([(sc.image, BOARD_SETS[name][1]) for name, sc in boards], board_run))
-    split = StageSplit(sizes, sets, 1)
+    split = StageSplit({f"{w}x{h}": [sc.image for _, sc in tables[f"{w}x{h} DICT_4X4_50, camera-like"][0]]
+                        for w, h in sizes})
     print(f"timing {len(sections)} tables, {args.rounds} rounds (a stage-split pass after each) ...",
           file=sys.stderr, flush=True)
     timed = time_sections(sections, args.rounds, between=split.run_pass)

@@ -64,7 +64,9 @@ def test_stage_split_passes_take_the_sizes_in_turn_and_leave_the_detector_as_it_
 
     before = {name: getattr(det_mod, name) for name in markers.STAGES}
     threaded = det_mod._THREAD_MAX_PIXELS
-    split = markers.StageSplit([(160, 120), (200, 150)], {"easy": 1}, seed0=1)
+    split = markers.StageSplit({f"{w}x{h}": [sc.image for _, sc in markers.rendered_scenes((w, h), "DICT_4X4_50",
+                                                                                         {"easy": 1}, 1)]
+                                for w, h in ((160, 120), (200, 150))})
     for _ in range(3):
         split.run_pass()
     assert [len(split.passes[k]) for k in ("160x120", "200x150")] == [2, 1]

@@ -25,7 +25,7 @@ import time
 import cv2
 import numpy as np
 from _results import fmt, write_results
-from _timing import _reference
+from _timing import reference_workload
 
 from visloc.markers import MarkerDetector
 from visloc.synth import random_scene
@@ -45,7 +45,7 @@ def workloads() -> dict:
         cv2.adaptiveThreshold(cv2.GaussianBlur(noise, (5, 5), 0), 255, cv2.ADAPTIVE_THRESH_MEAN_C,
                               cv2.THRESH_BINARY, 9, 5)
 
-    return {"reference": _reference, "blur+threshold": image,
+    return {"reference": reference_workload, "blur+threshold": image,
             "opencv detect": lambda: aruco.detectMarkers(scene.image), "visloc detect": lambda: visloc.detect(scene.image)}
 
 
@@ -83,7 +83,7 @@ def markdown(result: dict) -> str:
     lines += [f"| {s:.0f} | " + " | ".join(fmt(v, 2) for v in row) + " |" for s, row in zip(result["starts"], rel)]
     lines += ["", f"| workload | usual fastest ms | windows > {SLOW:.2f}x | slowest window | corr. with visloc detect |",
               "|---|---|---|---|---|"]
-    for k, name in enumerate(names):
+    for name in names:
         s = result["summary"][name]
         lines.append(f"| {name} | {fmt(s['usual_ms'], 3)} | {s['slow_windows']}/{len(rel)} | {fmt(s['slowest'], 2)}x | "
                      f"{fmt(s['corr_visloc'], 2)} |")

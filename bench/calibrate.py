@@ -37,14 +37,13 @@ from __future__ import annotations
 import argparse
 import platform
 import sys
-import time
 from dataclasses import replace
 from pathlib import Path
 
 import cv2
 import numpy as np
 from _results import fmt, write_results
-from _timing import steady
+from _timing import steady, time_sections
 
 from visloc.boards import (
     CharucoBoard,
@@ -112,35 +111,17 @@ def _holdout_rms(K, dist, views) -> float:
 ROUNDS = 3
 
 
-def _detect_timed(run_: dict, images: list) -> tuple[dict, dict]:
-    """Every method's detections on ``images`` and the sum over the images of each one's fastest
-    detection time of :data:`ROUNDS` (s), the methods interleaved (their order alternating) and
-    each call started when the host runs at its normal speed (``_timing.Steady``)."""
-    found = {m: [None] * len(images) for m in run_}
-    best = {m: np.full(len(images), np.inf) for m in run_}
-    for k, image in enumerate(images):
-        for r in range(ROUNDS):
-            for m in (list(run_) if (k + r) % 2 == 0 else list(run_)[::-1]):
-                steady().wait(every=0.25)
-                t0 = time.perf_counter()
-                found[m][k] = run_[m](image)
-                best[m][k] = min(best[m][k], time.perf_counter() - t0)
-    return found, {m: float(b.sum()) for m, b in best.items()}
-
-
-def _fastest(found: dict, solve) -> dict:
-    """Each method's fastest time (s) of :data:`ROUNDS` calls of ``solve(method, found[method])``
-    (its views' corners), the methods interleaved, each call started when the host runs at its
-    normal speed."""
-    methods = list(found)
-    best = dict.fromkeys(methods, np.inf)
-    for r in range(ROUNDS):
-        for m in (list(methods) if r % 2 == 0 else list(methods)[::-1]):
-            steady().wait()
-            t0 = time.perf_counter()
-            solve(m, found[m])
-            best[m] = min(best[m], time.perf_counter() - t0)
-    return best
+def _detect_and_solve(run_: dict, images: list, solve) -> tuple[dict, dict, dict]:
+    """Every method's detections on ``images``, what ``solve(method, detections)`` makes of them,
+    and the seconds of both: the sum of each image's fastest detection of :data:`ROUNDS` plus the
+    fastest solve of as many, the methods interleaved (``_timing.time_sections``)."""
+    detect_s, found = time_sections([(images, run_)], ROUNDS)[0]
+    # each solve's output in a list: time_sections reads a tuple output, as (K, dist) is, as a
+    # peer's (output, its own seconds)
+    solves = {m: (lambda _, m=m: [solve(m, found[m])]) for m in run_}
+    solve_s, solved = time_sections([([None], solves)], ROUNDS)[0]
+    seconds = {m: float(detect_s[m].sum() + solve_s[m][0]) for m in run_}
+    return found, {m: out[0][0] for m, out in solved.items()}, seconds
 
 
 def run(seeds: list[int]) -> dict:
@@ -151,8 +132,7 @@ def run(seeds: list[int]) -> dict:
         print(f"calibrate: view set {seed} ...", file=sys.stderr, flush=True)
         views = calibration_views(BOARD, N_VIEWS, size=SIZE, seed=seed)
         truth_K = views[0].render.K
-        found, detect_s = _detect_timed(run_, [v.image for v in views])
-        solve_s = _fastest(found, _calibrate)
+        found, _, seconds = _detect_and_solve(run_, [v.image for v in views], _calibrate)
         for m in run_:
             s = stats[m]
             for view, f in zip(views, found[m], strict=True):
@@ -163,7 +143,7 @@ def run(seeds: list[int]) -> dict:
             s["f_err"].extend([abs(K[0, 0] - truth_K[0, 0]), abs(K[1, 1] - truth_K[1, 1])])
             s["c_err"].extend([abs(K[0, 2] - truth_K[0, 2]), abs(K[1, 2] - truth_K[1, 2])])
             s["holdout_rms"].append(_holdout_rms(K, dist, views[N_CALIB:]))
-            s["seconds"].append(detect_s[m] + solve_s[m])
+            s["seconds"].append(seconds[m])
     out = {}
     for m, s in stats.items():
         e = np.array(s["errors"])
@@ -212,8 +192,8 @@ def run_grid(seeds: list[int]) -> dict:
         print(f"calibrate: marker-grid set {seed} ...", file=sys.stderr, flush=True)
         views = marker_map_views(GRID, "DICT_4X4_50", N_VIEWS, size=SIZE, seed=100 + seed)
         K_true = views[0].render.K
-        found, detect_s = _detect_timed(run_, [v.render.image for v in views])
-        solve_s = _fastest(found, lambda m, views: calibrate(views, board, SIZE))
+        found, cals, seconds = _detect_and_solve(run_, [v.render.image for v in views],
+                                                 lambda _, corners: calibrate(corners, board, SIZE))
         markers = [sorted(v.render.markers, key=lambda t: board.row(t.id)) for v in views]
         for m in run_:
             s = stats[m]
@@ -223,8 +203,8 @@ def run_grid(seeds: list[int]) -> dict:
                 s["visible"] += int(seen.sum())
                 s["found"] += len(f)
                 s["errors"].extend(np.linalg.norm(f.corners - truth[f.ids], axis=1).tolist())
-            cal = calibrate(found[m], board, SIZE)
-            s["seconds"].append(detect_s[m] + solve_s[m])
+            cal = cals[m]
+            s["seconds"].append(seconds[m])
             s["f_err"].extend([abs(cal.K[0, 0] - K_true[0, 0]), abs(cal.K[1, 1] - K_true[1, 1])])
             s["c_err"].extend([abs(cal.K[0, 2] - K_true[0, 2]), abs(cal.K[1, 2] - K_true[1, 2])])
             s["k1_err"].append(abs(cal.dist[0] - CALIBRATION_CAMERA.k1))

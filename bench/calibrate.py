@@ -16,7 +16,7 @@ against the truth; calibrating from views 0-19 of each set (OpenCV's five-coeffi
 all): the errors of fx, fy, cx, cy (px) and the RMS reprojection error on views 20-29 (their
 true corners, each view's pose solved with the calibrated camera by ``solvePnP``); and the time
 to calibrate from all 30 views (detection plus solver): each view's detection and the solver
-its fastest of three rounds, the methods interleaved, every call starting when the host runs
+its fastest of three rounds (``--rounds``), the methods interleaved, every call starting when the host runs
 at its normal speed (``_timing.Steady``).
 
 A second table does the same for visloc's own marker grid as the board (a 5 x 9 ``GridMap`` of
@@ -107,24 +107,25 @@ def _holdout_rms(K, dist, views) -> float:
     return float(np.sqrt(np.mean(np.square(err))))
 
 
-#: timing rounds: each view's detection and each calibration solve count their fastest of these
+#: timing rounds by default: each view's detection and each calibration solve count their fastest
+#: of these
 ROUNDS = 3
 
 
-def _detect_and_solve(run_: dict, images: list, solve) -> tuple[dict, dict, dict]:
+def _detect_and_solve(run_: dict, images: list, solve, rounds: int) -> tuple[dict, dict, dict]:
     """Every method's detections on ``images``, what ``solve(method, detections)`` makes of them,
-    and the seconds of both: the sum of each image's fastest detection of :data:`ROUNDS` plus the
+    and the seconds of both: the sum of each image's fastest detection of ``rounds`` plus the
     fastest solve of as many, the methods interleaved (``_timing.time_sections``)."""
-    detect_s, found = time_sections([(images, run_)], ROUNDS)[0]
+    detect_s, found = time_sections([(images, run_)], rounds)[0]
     # each solve's output in a list: time_sections reads a tuple output, as (K, dist) is, as a
     # peer's (output, its own seconds)
     solves = {m: (lambda _, m=m: [solve(m, found[m])]) for m in run_}
-    solve_s, solved = time_sections([([None], solves)], ROUNDS)[0]
+    solve_s, solved = time_sections([([None], solves)], rounds)[0]
     seconds = {m: float(detect_s[m].sum() + solve_s[m][0]) for m in run_}
     return found, {m: out[0][0] for m, out in solved.items()}, seconds
 
 
-def run(seeds: list[int]) -> dict:
+def run(seeds: list[int], rounds: int = ROUNDS) -> dict:
     run_ = methods()
     stats = {m: {"found": 0, "visible": 0, "errors": [], "f_err": [], "c_err": [], "holdout_rms": [], "seconds": []}
              for m in run_}
@@ -132,7 +133,7 @@ def run(seeds: list[int]) -> dict:
         print(f"calibrate: view set {seed} ...", file=sys.stderr, flush=True)
         views = calibration_views(BOARD, N_VIEWS, size=SIZE, seed=seed)
         truth_K = views[0].render.K
-        found, _, seconds = _detect_and_solve(run_, [v.image for v in views], _calibrate)
+        found, _, seconds = _detect_and_solve(run_, [v.image for v in views], _calibrate, rounds)
         for m in run_:
             s = stats[m]
             for view, f in zip(views, found[m], strict=True):
@@ -182,7 +183,7 @@ def _grid_methods() -> dict:
                    "opencv_subpix": opencv(True)}
 
 
-def run_grid(seeds: list[int]) -> dict:
+def run_grid(seeds: list[int], rounds: int = ROUNDS) -> dict:
     """visloc's marker-grid board against OpenCV's marker corners on the same views: corners
     against the truth, the focal length, principal point and k1 of a calibration from all views."""
     board, run_ = _grid_methods()
@@ -193,7 +194,7 @@ def run_grid(seeds: list[int]) -> dict:
         views = marker_map_views(GRID, "DICT_4X4_50", N_VIEWS, size=SIZE, seed=100 + seed)
         K_true = views[0].render.K
         found, cals, seconds = _detect_and_solve(run_, [v.render.image for v in views],
-                                                 lambda _, corners: calibrate(corners, board, SIZE))
+                                                 lambda _, corners: calibrate(corners, board, SIZE), rounds)
         markers = [sorted(v.render.markers, key=lambda t: board.row(t.id)) for v in views]
         for m in run_:
             s = stats[m]
@@ -250,7 +251,7 @@ def markdown(result: dict) -> str:
     res = result["methods"]
     lines = [(f"\n**ChArUco calibration**, {SIZE[0]}x{SIZE[1]} camera-like views of a 9 x 6 board, "
              f"{len(result['seeds'])} sets of {N_VIEWS} views (calibrated from {N_CALIB}, {N_VIEWS - N_CALIB} held out; "
-             f"errors against the truth; seconds: each view's detection and the solve, the fastest of {ROUNDS} "
+             f"errors against the truth; seconds: each view's detection and the solve, the fastest of {result['rounds']} "
              "interleaved rounds, the median over the sets)\n"),
              ("| method | corners found / visible | corner RMS px | corner median px | fx, fy error px (mean) | "
              "cx, cy error px (mean) | held-out reprojection RMS px | s to calibrate from 30 views |"),
@@ -286,12 +287,15 @@ def markdown(result: dict) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sets", type=int, default=3)
+    ap.add_argument("--rounds", type=int, default=ROUNDS,
+                    help="timing rounds: each detection and solve counts its fastest (the errors do not change)")
     ap.add_argument("--out", default=str(ROOT / "bench/results"))
     args = ap.parse_args(argv)
     seeds = list(range(args.sets))
     result = {"machine": {"python": sys.version.split()[0], "opencv": cv2.__version__, "numpy": np.__version__,
                           "platform": platform.platform(), "cores": len(__import__("os").sched_getaffinity(0))},
-              "seeds": seeds, "methods": run(seeds), "grid": run_grid(seeds), "defocus": run_defocus()}
+              "seeds": seeds, "rounds": args.rounds, "methods": run(seeds, args.rounds),
+              "grid": run_grid(seeds, args.rounds), "defocus": run_defocus()}
     result["steady"] = steady().summary()
     write_results(args.out, "calibrate", result, markdown(result))
     return 0

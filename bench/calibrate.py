@@ -29,7 +29,7 @@ A third table shows the corners under growing defocus (12 views per optics blur 
 1.5, 2 and 2.5 px): visloc with its default edge fit and with ``method="saddle"``, and OpenCV's
 ``CharucoDetector`` (default, SUBPIX).
 
-Usage: ``python bench/calibrate.py`` (about 2 minutes); writes ``bench/results/calibrate.json`` and ``calibrate.md``.
+Usage: ``python bench/calibrate.py [--rounds N]`` (about a minute); writes ``bench/results/calibrate.json`` and ``calibrate.md``.
 """
 
 from __future__ import annotations

@@ -33,6 +33,7 @@ import math
 import os
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
@@ -48,6 +49,7 @@ from visloc.pose.maps import GridMap
 from visloc.sim import (
     SIM_GRID,
     BottomCamera,
+    SimResult,
     Vehicle,
     VisionEstimator,
     VisionSensors,
@@ -104,7 +106,7 @@ class _TruthCamera(BottomCamera):
         return self._first
 
 
-def ceiling(seconds: float | None, render: bool, progress=None) -> dict:
+def ceiling(seconds: float | None, render: bool, progress: Callable[[float], None] | None = None) -> SimResult:
     """hover-vision with the true camera pose as every fix (no marker vision), the frames
     rendered or not: how fast the loop runs with the vision's cost taken out."""
     sc = get_scenario("hover-vision")
@@ -145,7 +147,7 @@ def _best_speed(runs: dict, rounds: int) -> list[dict]:
             pieces[name].append(wall)
     out = []
     for name, rs in rows.items():
-        same = [{k: v for k, v in r.items() if k not in ("realtime_factor", "simulated_s")} for r in rs]
+        same = [{k: v for k, v in r.items() if k != "realtime_factor"} for r in rs]
         assert all(r == same[0] for r in same), f"{name}: the repeated runs differ"
         best = np.min(pieces[name], axis=0).sum()  # each second's fastest round
         out.append({**rs[0], "realtime_factor": rs[0]["simulated_s"] / best,

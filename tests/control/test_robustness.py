@@ -15,6 +15,7 @@ from visloc.control import (
     vertex_check,
     vertex_stability,
 )
+from visloc.control.robustness import _lmi_scs_data
 from visloc.model import ARDRONE2
 
 P = ARDRONE2
@@ -36,6 +37,41 @@ def test_stable_vertices_do_not_make_a_stable_polytope():
     assert res.status == "feasible" and res.max_lmi_eig < 0
     assert np.all(np.linalg.eigvalsh(res.P) > 0)
 
+
+
+def test_the_lmi_data_handed_to_scs_is_the_lmi():
+    # s = b - A x with x = svec(P) must hold P - I and -(A_i^T P + P A_i) - I, each as SCS
+    # reads a cone: the lower triangle column by column, off-diagonal entries times sqrt(2)
+    rng = np.random.default_rng(3)
+    n = 4
+    mats = rng.normal(size=(5, n, n))
+    p = rng.normal(size=(n, n))
+    p = p + p.T
+    a_mat, b_vec, basis = _lmi_scs_data(mats)
+    cols, rows = np.triu_indices(n)
+    weight = np.where(rows != cols, np.sqrt(2.0), 1.0)
+    x = p[rows, cols] * weight
+    np.testing.assert_allclose(basis @ x, p, atol=1e-12)  # smat(svec(P)) = P
+    s = (b_vec - a_mat @ x).reshape(len(mats) + 1, -1)
+    wanted = [p - np.eye(n)] + [-(a.T @ p + p @ a) - np.eye(n) for a in mats]
+    for got, w in zip(s, wanted):
+        np.testing.assert_allclose(got, w[rows, cols] * weight, atol=1e-12)
+
+
+def test_scs_on_the_data_built_here_agrees_with_scs_through_cvxpy():
+    pytest.importorskip("cvxpy", exc_type=ImportError)
+    rng = np.random.default_rng(8)
+    base = rng.normal(size=(4, 4)) - 4.0 * np.eye(4)  # stable
+    near = base + 0.3 * rng.normal(size=(12, 4, 4))  # stable vertices sharing a certificate
+    far = np.array([A1, A2] * 3) + 0.05 * rng.normal(size=(6, 2, 2))  # stable vertices, none shared
+    for mats, wanted in ((near, "feasible"), (far, "infeasible")):
+        assert vertex_stability(mats)[0]
+        direct, through = common_lyapunov(mats), common_lyapunov(mats, solver="SCS")
+        assert direct.status == through.status == wanted, (direct.message, through.message)
+        assert direct.message.startswith("SCS: ")
+        if wanted == "feasible":
+            for a in mats:
+                assert np.max(np.linalg.eigvalsh(a.T @ direct.P + direct.P @ a)) < 0
 
 def test_lyapunov_unavailable_without_cvxpy(monkeypatch):
     monkeypatch.setitem(sys.modules, "cvxpy", None)  # import cvxpy now raises ImportError

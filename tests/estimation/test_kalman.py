@@ -104,9 +104,11 @@ def simulate_model(kf_model, kind, rng, n_steps, accel_noise, r_cov):
         x0[2::order] = rng.normal(0.0, 0.5, 2)
     x[0] = x0
     helper = PositionVelocityKF(2, model=kf_model, accel_noise=accel_noise, accel_noise_kind=kind)
+    white = rng.standard_normal((n_steps, 2 * order))
     for k in range(1, n_steps):
         F, Q = helper.transition(t[k] - t[k - 1])
-        x[k] = F @ x[k - 1] + rng.multivariate_normal(np.zeros(2 * order), Q)
+        w, v = np.linalg.eigh(Q)  # Q = L L^T with L = V sqrt(W): process noise ~ N(0, Q)
+        x[k] = F @ x[k - 1] + (v * np.sqrt(np.clip(w, 0.0, None))) @ white[k]
     pos = x[:, 0::order]
     z = pos + rng.multivariate_normal(np.zeros(2), r_cov, n_steps)
     drop = rng.random(n_steps) < 0.1

@@ -12,7 +12,7 @@ Two tests:
 * the report's vertex check (eq. 4.16): every vertex has ``max Re lambda < 0``. Necessary,
   **not sufficient**: a polytope of stable vertices may contain unstable matrices;
 * a common quadratic Lyapunov function: ``P > 0`` with ``A_i^T P + P A_i < 0`` at every
-  vertex (an LMI, solved with cvxpy when it is installed: ``pip install visloc[lmi]``).
+  vertex (an LMI, solved with SCS, which comes with cvxpy: ``pip install visloc[lmi]``).
   Sufficient: it proves every matrix of the polytope stable (even time-varying ones).
 """
 
@@ -238,10 +238,11 @@ def common_lyapunov(matrices: FloatArray, *, solver: str | None = None) -> Lyapu
     matrices : array_like (N, n, n)
         The polytope's vertices (e.g. :func:`closed_loop_vertices`), N >= 1.
     solver : str, optional
-        cvxpy solver name. By default SCS (first order: 1.5-2 s of solving, plus about 1 s
-        for cvxpy to compile, for the 256 vertices of the 16-state loop here) with at
-        most 1000 iterations, then Clarabel (interior point, about 10 s) when SCS stops
-        without a conclusion (near the feasibility boundary).
+        cvxpy solver name (the LMI is then posed and compiled by cvxpy). By default SCS
+        (first order, at most 1000 iterations: 1.5-2 s for the 256 vertices of the 16-state
+        loop here) on the problem data built here, which is what cvxpy hands SCS without its
+        1.5 s of compiling; then Clarabel through cvxpy (interior point, about 10 s) when SCS
+        stops without a conclusion (near the feasibility boundary).
 
     Returns
     -------
@@ -260,46 +261,109 @@ def common_lyapunov(matrices: FloatArray, *, solver: str | None = None) -> Lyapu
     except ImportError:
         return LyapunovResult("unavailable", None, math.nan,
                               "cvxpy is not installed (pip install visloc[lmi])")
-    size = m.shape[1]
     scale = matrix_balance(m.mean(axis=0), permute=False, separate=True)[1][0]  # D = diag(scale)
     balanced = m * (scale[None, None, :] / scale[None, :, None])  # D^-1 A_i D
-    p_var = cp.Variable((size, size), symmetric=True)
-    eye = np.eye(size)
-    constraints = [p_var >> eye]
-    # one live array per vertex: cvxpy keys large constants by id(array), and views made and
-    # dropped in the loop reuse one id, which left it comparing all 256 pairwise (the same
-    # certificate either way; 3.1 s instead of 3.9 s at 2 sigma, medians of 3 runs, 2026-12-06)
-    transposed = list(balanced.transpose(0, 2, 1))
-    for a_t in transposed:
-        lhs = a_t @ p_var
-        constraints.append(lhs + lhs.T << -eye)  # A_i^T P + P A_i <= -I
-    problem = cp.Problem(cp.Minimize(0), constraints)  # a feasibility problem
     installed = cp.installed_solvers()
     if solver is not None:
         attempts = [(solver, {})]
     else:
         attempts = [(name, opts) for name, opts in (("SCS", {"max_iters": 1000}), ("CLARABEL", {}))
                     if name in installed] or [(None, {})]
-    notes = []
+    notes, p_prime = [], None
     for name, opts in attempts:
-        try:
-            problem.solve(solver=name, **opts)
-        except cp.error.SolverError as exc:
-            notes.append(f"{name}: failed ({exc})")
-            continue
-        notes.append(f"{name}: {problem.status}")
-        if problem.status in ("optimal", "optimal_inaccurate", "infeasible"):
+        if name == "SCS" and solver is None:  # the default: SCS on the LMI's data, built here
+            status, p_prime = _lmi_scs(balanced, **opts)
+        else:
+            status, p_prime = _lmi_cvxpy(cp, balanced, name, opts)
+        notes.append(f"{name}: {status}")
+        if status in ("optimal", "optimal_inaccurate", "infeasible"):
             break
     message = "; ".join(notes)
-    if p_var.value is None or problem.status not in ("optimal", "optimal_inaccurate"):
+    if p_prime is None or status not in ("optimal", "optimal_inaccurate"):
         return LyapunovResult("infeasible", None, math.nan, message)
-    p_val = 0.5 * (p_var.value + p_var.value.T) / np.outer(scale, scale)  # D^-1 P' D^-1
+    p_val = 0.5 * (p_prime + p_prime.T) / np.outer(scale, scale)  # D^-1 P' D^-1
     worst = max(float(np.max(np.linalg.eigvalsh(a.T @ p_val + p_val @ a))) for a in m)
     if np.min(np.linalg.eigvalsh(p_val)) <= 0.0 or worst >= 0.0:
         return LyapunovResult("infeasible", None, worst,
                               message + "; the P returned fails the eigenvalue check")
     return LyapunovResult("feasible", p_val, worst, message)
 
+
+def _lmi_cvxpy(cp, balanced: FloatArray, solver: str, opts: dict) -> tuple[str, FloatArray | None]:
+    """:func:`common_lyapunov`'s LMI on ``balanced`` (N, n, n) posed in cvxpy and solved with
+    ``solver``: (cvxpy's status, or "failed (...)", and ``P'`` when it has a value)."""
+    size = balanced.shape[1]
+    p_var = cp.Variable((size, size), symmetric=True)
+    eye = np.eye(size)
+    constraints = [p_var >> eye]
+    # one live array per vertex: cvxpy keys large constants by id(array), and views made and
+    # dropped in the loop reuse one id, which left it comparing all 256 pairwise
+    transposed = list(balanced.transpose(0, 2, 1))
+    for a_t in transposed:
+        lhs = a_t @ p_var
+        constraints.append(lhs + lhs.T << -eye)  # A_i^T P + P A_i <= -I
+    problem = cp.Problem(cp.Minimize(0), constraints)  # a feasibility problem
+    try:
+        problem.solve(solver=solver, **opts)
+    except cp.error.SolverError as exc:
+        return f"failed ({exc})", None
+    return problem.status, p_var.value
+
+
+#: SCS's status codes as cvxpy names them (its SCS interface's map)
+_SCS_STATUS = {1: "optimal", 2: "optimal_inaccurate", -2: "infeasible", -7: "infeasible_inaccurate",
+               -1: "unbounded", -6: "unbounded_inaccurate"}
+
+
+def _lmi_scs_data(balanced: FloatArray) -> tuple[object, FloatArray, FloatArray]:
+    """SCS's data of :func:`common_lyapunov`'s LMI on ``balanced`` (N, n, n).
+
+    SCS's form is ``A x + s = b`` with ``s`` in N + 1 semidefinite cones, each a symmetric
+    matrix given as its lower triangle column by column with the off-diagonal entries times
+    sqrt(2) (``svec``). The unknown is ``x = svec(P')``; the cones hold ``P' - I``
+    (``A = -1``, ``b = -svec(I)``) and ``-(A_i^T P' + P' A_i) - I`` (``A = svec(L_i(smat(.)))``,
+    ``b = -svec(I)``).
+
+    Returns ``A`` (scipy CSC, (N + 1) m x m with m = n (n + 1) / 2), ``b`` ((N + 1) m,) and the
+    basis (n, n, m): ``basis @ x`` is ``smat(x)``.
+    """
+    import scipy.sparse as sp
+
+    n_vert, size = balanced.shape[:2]
+    cols, rows = np.triu_indices(size)  # the lower triangle column by column: (rows[k], cols[k])
+    weight = np.where(rows != cols, math.sqrt(2.0), 1.0)  # svec's factor on each entry
+    n_var = len(rows)
+    basis = np.zeros((size, size, n_var))  # smat(e_k)
+    basis[rows, cols, np.arange(n_var)] = 1.0 / weight
+    basis[cols, rows, np.arange(n_var)] = 1.0 / weight
+    blocks = [-sp.identity(n_var, format="csr")]
+    for chunk in np.array_split(balanced, max(1, n_vert // 32)):  # 32 vertices: ~9 MB at a time
+        g = (chunk.transpose(0, 2, 1) @ basis.reshape(size, -1)).reshape(len(chunk), size, size, n_var)
+        lyap = g + g.transpose(0, 2, 1, 3)  # A_i^T E_k + E_k A_i, (vertices, n, n, m)
+        blocks.append(sp.csr_matrix((lyap[:, rows, cols, :] * weight[None, :, None]).reshape(-1, n_var)))
+    b_vec = np.tile(-np.eye(size)[rows, cols], n_vert + 1)
+    return sp.vstack(blocks, format="csc"), b_vec, basis
+
+
+#: SCS's status codes as cvxpy names them (its SCS interface's map)
+_SCS_STATUS = {1: "optimal", 2: "optimal_inaccurate", -2: "infeasible", -7: "infeasible_inaccurate",
+               -1: "unbounded", -6: "unbounded_inaccurate"}
+
+
+def _lmi_scs(balanced: FloatArray, *, max_iters: int) -> tuple[str, FloatArray | None]:
+    """:func:`common_lyapunov`'s LMI on ``balanced`` (N, n, n) handed to SCS directly: the
+    problem and tolerances (1e-5) cvxpy gives SCS, without cvxpy's compile (about 1 s of the
+    256-vertex problem's 3 s here). Returns (status as cvxpy names it, ``P'`` or None)."""
+    import scs
+
+    a_mat, b_vec, basis = _lmi_scs_data(balanced)
+    cones = {"s": [balanced.shape[1]] * (balanced.shape[0] + 1)}
+    out = scs.SCS({"A": a_mat, "b": b_vec, "c": np.zeros(a_mat.shape[1])}, cones, verbose=False,
+                  eps_abs=1e-5, eps_rel=1e-5, max_iters=max_iters).solve()
+    status = _SCS_STATUS.get(out["info"]["status_val"], f"failed ({out['info']['status']})")
+    if status not in ("optimal", "optimal_inaccurate"):
+        return status, None
+    return status, basis @ out["x"]
 
 def vertex_check(
     n_sigma: float,

@@ -358,8 +358,8 @@ def _lmi_scs(balanced: FloatArray, *, max_iters: int) -> tuple[str, FloatArray |
 
     a_mat, b_vec, basis = _lmi_scs_data(balanced)
     cones = {"s": [balanced.shape[1]] * (balanced.shape[0] + 1)}
-    out = scs.SCS({"A": a_mat, "b": b_vec, "c": np.zeros(a_mat.shape[1])}, cones, verbose=False,
-                  eps_abs=1e-5, eps_rel=1e-5, max_iters=max_iters).solve()
+    out = scs.solve({"A": a_mat, "b": b_vec, "c": np.zeros(a_mat.shape[1])}, cones, verbose=False,
+                    eps_abs=1e-5, eps_rel=1e-5, max_iters=max_iters)  # as cvxpy calls it
     status = _SCS_STATUS.get(out["info"]["status_val"], f"failed ({out['info']['status']})")
     if status not in ("optimal", "optimal_inaccurate"):
         return status, None

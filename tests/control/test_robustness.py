@@ -38,7 +38,6 @@ def test_stable_vertices_do_not_make_a_stable_polytope():
     assert np.all(np.linalg.eigvalsh(res.P) > 0)
 
 
-
 def test_the_lmi_data_handed_to_scs_is_the_lmi():
     # s = b - A x with x = svec(P) must hold P - I and -(A_i^T P + P A_i) - I, each as SCS
     # reads a cone: the lower triangle column by column, off-diagonal entries times sqrt(2)
@@ -72,6 +71,7 @@ def test_scs_on_the_data_built_here_agrees_with_scs_through_cvxpy():
         if wanted == "feasible":
             for a in mats:
                 assert np.max(np.linalg.eigvalsh(a.T @ direct.P + direct.P @ a)) < 0
+
 
 def test_lyapunov_unavailable_without_cvxpy(monkeypatch):
     monkeypatch.setitem(sys.modules, "cvxpy", None)  # import cvxpy now raises ImportError

@@ -240,9 +240,9 @@ def common_lyapunov(matrices: FloatArray, *, solver: str | None = None) -> Lyapu
     solver : str, optional
         cvxpy solver name (the LMI is then posed and compiled by cvxpy). By default SCS
         (first order, at most 1000 iterations: 1.5-2 s for the 256 vertices of the 16-state
-        loop here) on the problem data built here, which is what cvxpy hands SCS without its
-        1.5 s of compiling; then Clarabel through cvxpy (interior point, about 10 s) when SCS
-        stops without a conclusion (near the feasibility boundary).
+        loop here) on the problem data built here, which is what cvxpy hands SCS, without
+        cvxpy's compile (about 1 s less); then Clarabel through cvxpy (interior point,
+        about 10 s) when SCS stops without a conclusion (near the feasibility boundary).
 
     Returns
     -------
@@ -310,11 +310,6 @@ def _lmi_cvxpy(cp, balanced: FloatArray, solver: str, opts: dict) -> tuple[str, 
     return problem.status, p_var.value
 
 
-#: SCS's status codes as cvxpy names them (its SCS interface's map)
-_SCS_STATUS = {1: "optimal", 2: "optimal_inaccurate", -2: "infeasible", -7: "infeasible_inaccurate",
-               -1: "unbounded", -6: "unbounded_inaccurate"}
-
-
 def _lmi_scs_data(balanced: FloatArray) -> tuple[object, FloatArray, FloatArray]:
     """SCS's data of :func:`common_lyapunov`'s LMI on ``balanced`` (N, n, n).
 
@@ -352,8 +347,8 @@ _SCS_STATUS = {1: "optimal", 2: "optimal_inaccurate", -2: "infeasible", -7: "inf
 
 def _lmi_scs(balanced: FloatArray, *, max_iters: int) -> tuple[str, FloatArray | None]:
     """:func:`common_lyapunov`'s LMI on ``balanced`` (N, n, n) handed to SCS directly: the
-    problem and tolerances (1e-5) cvxpy gives SCS, without cvxpy's compile (about 1 s of the
-    256-vertex problem's 3 s here). Returns (status as cvxpy names it, ``P'`` or None)."""
+    problem and tolerances (1e-5) cvxpy gives SCS, without cvxpy's compile (2.2-2.8 s against
+    3.1-3.7 s through cvxpy for the 256-vertex problem here). Returns (status as cvxpy names it, ``P'`` or None)."""
     import scs
 
     a_mat, b_vec, basis = _lmi_scs_data(balanced)
@@ -364,6 +359,7 @@ def _lmi_scs(balanced: FloatArray, *, max_iters: int) -> tuple[str, FloatArray |
     if status not in ("optimal", "optimal_inaccurate"):
         return status, None
     return status, basis @ out["x"]
+
 
 def vertex_check(
     n_sigma: float,

@@ -21,6 +21,7 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 from scipy.linalg import matrix_balance
@@ -265,16 +266,14 @@ def common_lyapunov(matrices: FloatArray, *, solver: str | None = None) -> Lyapu
     balanced = m * (scale[None, None, :] / scale[None, :, None])  # D^-1 A_i D
     installed = cp.installed_solvers()
     if solver is not None:
-        attempts = [(solver, {})]
-    else:
-        attempts = [(name, opts) for name, opts in (("SCS", {"max_iters": 1000}), ("CLARABEL", {}))
-                    if name in installed] or [(None, {})]
+        attempts = [(solver, partial(_lmi_cvxpy, cp, balanced, solver))]
+    else:  # the default: SCS on the LMI's data built here, then Clarabel posed by cvxpy
+        attempts = [(name, solve) for name, solve in (("SCS", partial(_lmi_scs, balanced, max_iters=1000)),
+                                                       ("CLARABEL", partial(_lmi_cvxpy, cp, balanced, "CLARABEL")))
+                    if name in installed] or [(None, partial(_lmi_cvxpy, cp, balanced, None))]
     notes, p_prime = [], None
-    for name, opts in attempts:
-        if name == "SCS" and solver is None:  # the default: SCS on the LMI's data, built here
-            status, p_prime = _lmi_scs(balanced, **opts)
-        else:
-            status, p_prime = _lmi_cvxpy(cp, balanced, name, opts)
+    for name, solve in attempts:
+        status, p_prime = solve()
         notes.append(f"{name}: {status}")
         if status in ("optimal", "optimal_inaccurate", "infeasible"):
             break
@@ -289,7 +288,7 @@ def common_lyapunov(matrices: FloatArray, *, solver: str | None = None) -> Lyapu
     return LyapunovResult("feasible", p_val, worst, message)
 
 
-def _lmi_cvxpy(cp, balanced: FloatArray, solver: str, opts: dict) -> tuple[str, FloatArray | None]:
+def _lmi_cvxpy(cp, balanced: FloatArray, solver: str | None) -> tuple[str, FloatArray | None]:
     """:func:`common_lyapunov`'s LMI on ``balanced`` (N, n, n) posed in cvxpy and solved with
     ``solver``: (cvxpy's status, or "failed (...)", and ``P'`` when it has a value)."""
     size = balanced.shape[1]
@@ -304,7 +303,7 @@ def _lmi_cvxpy(cp, balanced: FloatArray, solver: str, opts: dict) -> tuple[str, 
         constraints.append(lhs + lhs.T << -eye)  # A_i^T P + P A_i <= -I
     problem = cp.Problem(cp.Minimize(0), constraints)  # a feasibility problem
     try:
-        problem.solve(solver=solver, **opts)
+        problem.solve(solver=solver)
     except cp.error.SolverError as exc:
         return f"failed ({exc})", None
     return problem.status, p_var.value

@@ -45,11 +45,18 @@ this 2-core machine OpenCV's two threads sometimes share one core, which makes i
 bimodal, 4.0 or 6.4 ms on one photo, and the median flip between the modes from run to run),
 and ``ms total`` sums those bests. The JSON keeps every round and the median. Each timed
 call starts when the host runs at its normal speed (``_timing.Steady``, checked at most every
-0.25 s).
+0.25 s). 30 rounds by default. On this host (2026-12-07/08) a run took 1 min 40 s with 30 rounds
+and with 15: both spent most of it waiting for the host (65 and 79 s). 30, because on this kind
+of host most rounds ran 1.3-1.7x slower than an image's best, and a best of 15 rounds depended
+on whether the run held a fast spell. Over five runs of 15 rounds, pairs of runs had 0-12
+per-image bests more than 15 % apart (5.2 on average). Pooled two runs at a time, as bests of
+30 rounds, pairs had 0-4 (0.9 on average). The five runs are kept in ``bench/results``
+(``rounds-15``, ``rounds-15/later``, ``rerun``, ``rerun-2``, ``rerun-3``), and
+``python bench/real_photos_rounds.py`` on them prints these counts.
 
 Usage::
 
-    python bench/real_photos.py [--rounds 15] [--quick] [--out bench/results]
+    python bench/real_photos.py [--rounds 30] [--quick] [--out bench/results]
 
 Writes ``real_photos.json`` and ``real_photos.md``.
 """
@@ -506,7 +513,7 @@ def _plain(o):
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--rounds", type=int, default=15)
+    ap.add_argument("--rounds", type=int, default=30)
     ap.add_argument("--quick", action="store_true", help="one round, 6 marker-free photos (a smoke run)")
     ap.add_argument("--out", default=str(ROOT / "bench/results"))
     args = ap.parse_args(argv)

@@ -47,8 +47,8 @@ and ``ms total`` sums those bests. The JSON keeps every round and the median. Ea
 call starts when the host runs at its normal speed (``_timing.Steady``, checked at most every
 0.25 s). 30 rounds by default. On this host (2026-12-07/08) a run took 1 min 40 s with 30 rounds
 and with 15: both spent most of it waiting for the host (65 and 79 s). 30, because on this kind
-of host most rounds ran 1.3-1.7x slower than an image's best, and a best of 15 rounds depended
-on whether the run held a fast spell. Over five runs of 15 rounds, pairs of runs had 0-12
+of host most rounds took 1.3-1.7x the time of the photos' bests (totals over the photos), and a
+best of 15 rounds depended on whether the run held a fast spell. Over five runs of 15 rounds, pairs of runs had 0-12
 per-image bests more than 15 % apart (5.2 on average). Pooled two runs at a time, as bests of
 30 rounds, pairs had 0-4 (0.9 on average). The five runs are kept in ``bench/results``
 (``rounds-15``, ``rounds-15/later``, ``rerun``, ``rerun-2``, ``rerun-3``), and

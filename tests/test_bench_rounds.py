@@ -97,3 +97,20 @@ def test_host_speed_refuses_a_log_shorter_than_two_windows(capsys):
         host_speed.main(["--seconds", "5", "--window", "10"])
     assert e.value.code == 2
     assert "at least two windows" in capsys.readouterr().err
+
+
+def test_host_speed_fast_share_counts_the_samples_within_15_percent_of_the_usual():
+    ms = np.array([[1.0, 4.0], [1.1, 4.7], [1.2, 4.5], [2.0, 8.0]])
+    np.testing.assert_allclose(host_speed.fast_share(ms, np.array([1.0, 4.0])), [0.5, 0.5])
+
+
+def test_host_speed_refuses_a_busy_cpu_it_cannot_use(capsys):
+    import os
+
+    before = os.sched_getaffinity(0)
+    cpu = max(before) + 1  # not among this process's CPUs
+    with pytest.raises(SystemExit) as e:
+        host_speed.main(["--seconds", "20", "--window", "10", "--busy-cpu", str(cpu)])
+    assert e.value.code == 2
+    assert f"--busy-cpu {cpu}" in capsys.readouterr().err
+    assert os.sched_getaffinity(0) == before  # refused before pinning anything

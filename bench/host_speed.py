@@ -98,6 +98,16 @@ def busy(cpu: int) -> multiprocessing.Process:
     """Pin this process to every allowed CPU but ``cpu`` and start a child spinning on ``cpu``
     (terminate it when done).
 
+    Parameters
+    ----------
+    cpu : int
+        The CPU to keep busy, one of ``os.sched_getaffinity(0)``.
+
+    Returns
+    -------
+    multiprocessing.Process
+        The spinning child (a daemon).
+
     Raises
     ------
     ValueError

@@ -39,7 +39,7 @@ from visloc.markers import MarkerDetector
 from visloc.synth import random_scene
 
 SLOW = 1.15  # a window this much slower than usual counts as slow
-NAMES = ["reference", "blur+threshold", "opencv detect", "visloc detect"]  # visloc's last
+NAMES = ["reference", "blur+threshold", "opencv detect", "visloc detect"]
 
 
 def workloads() -> dict:
@@ -181,7 +181,7 @@ def main(argv: list[str] | None = None) -> int:
         if spinner is not None:
             spinner.terminate()
     starts, usual, rel = windows(np.array(stamps), ms, args.window)
-    vis = rel[:, -1]
+    vis = rel[:, NAMES.index("visloc detect")]
     share = fast_share(ms, usual)
     summary = {name: {"usual_ms": float(usual[k]), "slow_windows": int((rel[:, k] > SLOW).sum()),
                       "slowest": float(rel[:, k].max()),

@@ -8,8 +8,9 @@ The scripts run one after another, each in its own process (``python bench/NAME.
 in the order of :data:`BENCHES`, which is the order the tables were run in; all of them take
 about 40 minutes on a 2-core machine. A line on stderr says when each one starts and how long
 it took; their own output goes to ``DIR/run_all.log``. A script that fails is reported and the
-others still run. Then ``bench/compare.py bench/results DIR`` checks the new run number by number
-(its report is printed, and written to ``DIR/compare.txt``).
+others still run. Then, unless ``--no-compare`` or DIR is ``bench/results`` itself,
+``bench/compare.py bench/results DIR`` checks the new run number by number (its report is
+printed, and written to ``DIR/compare.txt``).
 
 Exit status 0 when every script ran and every number is within compare's tolerance, 1 when a
 script failed or a number moved by more than it, 2 on bad arguments.

@@ -45,6 +45,23 @@ def render_square(size=(120, 100), corners=None, supersample=8, dark=30, bright=
     return np.clip(np.round(img), 0, 255).astype(np.uint8)
 
 
+def load_bench(name: str):
+    """``bench/NAME.py`` as a module (its own imports of ``_timing``, ``_results``, ``_peers``
+    found in bench/)."""
+    import importlib.util
+    from pathlib import Path
+
+    bench = Path(__file__).resolve().parents[1] / "bench"
+    sys.path.insert(0, str(bench))
+    try:
+        spec = importlib.util.spec_from_file_location(f"bench_{name}", bench / f"{name}.py")
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        return module
+    finally:
+        sys.path.remove(str(bench))
+
+
 def pytest_addoption(parser):
     parser.addoption("--runslow", action="store_true",
                      help="also run tests/sweeps: the issues' must-reach accuracy figures, measured by the benches "

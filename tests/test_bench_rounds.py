@@ -1,30 +1,13 @@
 """``bench/_timing.py``'s round order, ``bench/markers.py``'s stage split and ``bench/host_speed.py``'s windows."""
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-_BENCH = Path(__file__).resolve().parents[1] / "bench"
+from tests.conftest import load_bench
 
-
-def _load(name: str):
-    """A bench script as a module (its ``_timing``/``_results`` imports found in bench/)."""
-    sys.path.insert(0, str(_BENCH))
-    try:
-        spec = importlib.util.spec_from_file_location(f"bench_{name}", _BENCH / f"{name}.py")
-        module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
-        return module
-    finally:
-        sys.path.remove(str(_BENCH))
-
-
-markers = _load("markers")
-timing = _load("_timing")
-host_speed = _load("host_speed")
+markers = load_bench("markers")
+timing = load_bench("_timing")
+host_speed = load_bench("host_speed")
 
 
 def test_time_sections_runs_every_sections_round_before_the_next_round_and_keeps_each_items_best():

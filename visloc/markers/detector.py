@@ -6,10 +6,10 @@ One frame's path:
    the first on a worker thread):
    2. Gaussian blur, 3. adaptive threshold, 4. outer contours of ink regions that enclose
    a hole, 5. candidate filter (4 and 5 in one compiled call);
-   then, pass by pass on the main thread, for the candidates no earlier pass proposed: a cheap
-   look at their cells (no black border, no contrast, or a white-bit count no marker has:
-   dropped), 6. radial-peak corner split, 7. line fits -> candidate quads in full-resolution
-   pixels;
+   then, on the main thread once every pass is done: a cheap look at the cells of all passes'
+   candidates (no black border, no contrast, or a white-bit count no marker has: dropped),
+   and pass by pass, for the candidates no earlier pass proposed and fitted, 6. radial-peak
+   corner split, 7. line fits -> candidate quads in full-resolution pixels;
 8. sub-pixel edge refinement of all candidates on the full-resolution grey image (batched),
    8b. curved sides under lens distortion;
 9. bit sampling with a per-marker threshold (each cell's bit the majority of its samples)
@@ -339,8 +339,8 @@ class DetectionTrace:
 class _PassImage:
     """Stages 2-5 of one search pass: the pass image's shape and scale to full resolution,
     its threshold window and candidate bounds, the blurred and binary images, and the
-    candidates (outer borders that enclose a hole and pass stage 5, each with its polygon);
-    then the polygons' corners in full-resolution pixels (K, 4, 2)."""
+    candidates (outer borders that enclose a hole and pass stage 5, each with its polygon),
+    and the polygons' corners in full-resolution pixels (K, 4, 2)."""
 
     shape: tuple[int, ...]
     scale: NDArray[np.float64]
@@ -349,7 +349,7 @@ class _PassImage:
     blurred: NDArray[np.uint8]
     binary: NDArray[np.uint8]
     found: list[tuple[NDArray[np.int32], NDArray[np.int32]]]
-    approx: NDArray[np.float64] | None = None
+    approx: NDArray[np.float64]
 
 
 _POOL: tuple[int, ThreadPoolExecutor] | None = None
@@ -416,6 +416,7 @@ class MarkerDetector:
                 params[key] = tuple(_as_pass(p) for p in params[key])  # type: ignore[union-attr]
         self.params = replace(DetectorParams(), **params)  # type: ignore[arg-type]
         _check_params(self.params)
+        self._filters: dict[tuple[float, float], CandidateFilter] = {}  # stage 5's bounds per pass (_search)
         # the lenient first look at a candidate's cells (before stage 6) allows this many white
         # bits: the dictionary's range widened by the correctable errors, and one more
         slack = int(self.dictionary.max_correction * self.params.error_correction_rate) + 1
@@ -559,34 +560,27 @@ class MarkerDetector:
         """Stages 2-5 of one search pass. Touches nothing shared, so the passes after the
         first run on a worker thread while the first goes on (the compiled stages 4 and 5 and
         OpenCV's filters release the GIL). The first look at the cells and stages 6-7 stay
-        on the main thread, for the candidates no earlier pass proposed: on the worker, their
-        Python waits for the GIL, and the looks at the markers the first pass already has cost
-        more than the thread saves (on 320 x 240 views of a 36-marker grid, 2.98 against 2.87
-        ms)."""
+        on the main thread (:meth:`_propose`): on the worker, their Python waits for the GIL
+        (on 320 x 240 views of a 36-marker grid, 2.98 against 2.87 ms)."""
         p = self.params
         work, scale = self._work_image(gray, sp.scale * base)
         window = sp.window if sp.window is not None else default_window(work.shape)
         # a marker needs at least about 1 px per cell to be decoded: smaller ones are not looked at
         min_side = max(p.candidates.min_side, (self.dictionary.marker_size + 2 * p.border_bits) / scale.max())
         # the image-border margin is in full-resolution pixels whatever the pass's scale
-        candidates = replace(p.candidates, min_side=min_side,
-                             border_distance=p.candidates.border_distance / scale.max())
+        key = (min_side, p.candidates.border_distance / scale.max())
+        candidates = self._filters.get(key)
+        if candidates is None:  # one per pass and image size (a dataclass replace costs 4 us a frame)
+            if len(self._filters) >= 64:
+                self._filters.clear()
+            candidates = self._filters[key] = replace(p.candidates, min_side=key[0], border_distance=key[1])
         blurred = blur(work, sigma=p.blur_sigma)  # stage 2
         binary = threshold(blurred, window=window, offset=p.offset if sp.offset is None else sp.offset,
                            native=p.native)  # stage 3
         # stage 4: a marker's frame encloses its white cells, so ink without a hole is no marker;
         # stage 5 on those borders
-        return self._polygons(_PassImage(work.shape, scale, window, candidates, blurred, binary,
-                                         find_candidates(binary, params=candidates, native=p.native)))
-
-    @staticmethod
-    def _polygons(search: _PassImage) -> _PassImage:
-        """The polygon corners of a pass's candidates in full-resolution pixels (``approx``)."""
-        k = len(search.found)
-        if not k:
-            return replace(search, approx=np.zeros((0, 4, 2)))
-        approx = _clockwise(np.array([q for _, q in search.found], np.float64).reshape(k, 4, 2))
-        return replace(search, approx=(approx + 0.5) * search.scale - 0.5)
+        found = find_candidates(binary, params=candidates, native=p.native)
+        return _PassImage(work.shape, scale, window, candidates, blurred, binary, found, _polygons(found, scale))
 
     def _looks_right(self, gray: NDArray[np.uint8], approx: NDArray) -> NDArray[np.bool_]:
         """A cheap, lenient look at the cells of candidates (K, 4, 2) through their polygon
@@ -636,9 +630,8 @@ class MarkerDetector:
         kernel = np.ones((width, width), np.uint8)
         if around is None:
             binary = cv2.erode(found.binary, kernel)
-            return self._polygons(replace(found, binary=binary,
-                                          found=find_candidates(binary, params=found.candidates,
-                                                                native=self.params.native)))
+            cands = find_candidates(binary, params=found.candidates, native=self.params.native)
+            return replace(found, binary=binary, found=cands, approx=_polygons(cands, found.scale))
         h, w = found.binary.shape
         lo, hi = around.min(axis=1), around.max(axis=1)  # (K, 2)
         side = (hi - lo).max(axis=1, keepdims=True)
@@ -658,15 +651,15 @@ class MarkerDetector:
         cands = [(c + origin, q + origin) for c, q in find_candidates(crop, params=bounds, native=self.params.native)]
         binary = np.zeros_like(found.binary)
         binary[y0:y1 + 1, x0:x1 + 1] = crop
-        return self._polygons(replace(found, binary=binary, found=cands))
+        return replace(found, binary=binary, found=cands, approx=_polygons(cands, found.scale))
 
     def _passes(self, gray: NDArray[np.uint8], passes: list[SearchPass], base: float,
                 keep: list[_PassImage]) -> Iterator[_PassImage]:
         """Stages 2-5 of the search passes in order, then (``erode``) stage 3b on the first
-        pass's binary image; the first pass is also appended to ``keep`` (for stage 3c). All passes but the first are computed on a worker thread
-        meanwhile, up to :data:`_THREAD_MAX_PIXELS` (beyond, OpenCV's own threads already
-        keep both cores of the bench machine busy and the hand-over only adds to the slowest
-        frames)."""
+        pass's binary image; the first pass is also appended to ``keep`` (for stage 3c). All
+        passes but the first are computed on a worker thread meanwhile, up to
+        :data:`_THREAD_MAX_PIXELS` (beyond, OpenCV's own threads already keep both cores of the
+        bench machine busy and the hand-over only adds to the slowest frames)."""
         first_pass, *rest = passes
         threaded = gray.size <= _THREAD_MAX_PIXELS
         later = [_pool().submit(self._search, gray, sp, base) for sp in rest] if threaded else []
@@ -748,7 +741,12 @@ class MarkerDetector:
 
         Pass by pass, a candidate that an earlier pass already proposed and fitted (or an
         earlier one of its own pass proposed) is passed over, the others are looked at
-        (:meth:`_looks_right`), and those whose cells look right are fitted."""
+        (:meth:`_looks_right`), and those whose cells look right are fitted. The look is one
+        call for the whole group, made for every candidate that neither ``taken`` nor an
+        earlier one of its own pass repeats (each look depends on its own candidate only, so
+        the candidates the rule keeps get the look they would get pass by pass; the copies of
+        markers an earlier pass fitted get a look too, and are then passed over: a look costs
+        less than a call); the fits stay pass by pass, so no marker is fitted twice."""
         p = self.params
         for search in group:
             self._log_pass(search, log)
@@ -758,22 +756,27 @@ class MarkerDetector:
         contours = [c for s in group for c, _ in s.found]
         scale = np.array([s.scale for s in group])[pass_of][:, None, :]  # (K, 1, 2)
         approx = np.concatenate([s.approx for s in group])
-        looks = np.zeros(len(approx), bool)
         t = len(taken)
         same = _same(np.concatenate([taken, approx]))[t:]  # (K, t + K): rows the group's candidates
-        done = np.concatenate([np.ones(t, bool), np.zeros(len(approx), bool)])  # fitted: earlier, then this group's
+        group_same = same[:, t:]
+        # repeats of taken or of an earlier candidate of the same pass: never looked at
+        passed_over = same[:, :t].any(axis=1) | np.tril(group_same & (pass_of[:, None] == pass_of[None, :]),
+                                                         -1).any(axis=1)
+        maybe = np.flatnonzero(~passed_over)
+        looks = np.zeros(len(approx), bool)
+        if len(maybe):
+            looks[maybe] = self._looks_right(gray, approx[maybe])
+        done = np.zeros(len(approx), bool)  # this group's candidates fitted by the earlier passes
         for k in range(len(group)):
-            mine = np.flatnonzero(pass_of == k)
-            if not len(mine):
-                continue
-            sub = same[mine]
-            fresh = mine[~(sub[:, done].any(axis=1) | np.tril(sub[:, t + mine], -1).any(axis=1))]
-            if len(fresh):
-                looks[fresh] = self._looks_right(gray, approx[fresh])
+            fresh = np.flatnonzero((pass_of == k) & ~passed_over)
+            if k and len(fresh) and done.any():  # repeats of a candidate an earlier pass fitted
+                fresh = fresh[~group_same[np.ix_(fresh, np.flatnonzero(done))].any(axis=1)]
             if log is not None:
                 for i in fresh[~looks[fresh]].tolist():
                     _note(log, contours[i], float(scale[i, 0, 0]), None, None, None, None, None, "bits")
             keep = fresh[looks[fresh]]
+            if not len(keep):
+                continue
             hints = (approx[keep] + 0.5) / scale[keep] - 0.5
             quads, fitted, splits = fit_quads([contours[i] for i in keep], hints=hints, sigma=p.corner_sigma,
                                               padding=p.corner_padding, splits=log is not None,
@@ -787,8 +790,8 @@ class MarkerDetector:
                 cands.contours.append(contours[i])
                 cands.scales.append(float(scale[i, 0, 0]))
                 cands.splits.append(splits[j] if splits is not None else None)
-            done[t + keep[fitted]] = True
-        return np.concatenate([taken, approx[done[t:]]])
+            done[keep[fitted]] = True
+        return np.concatenate([taken, approx[done]])
 
     def _find(self, gray: NDArray[np.uint8], searches: Iterator[_PassImage], inverted: bool,
               log: dict | None, taken: NDArray | None = None) -> list[MarkerDetection]:
@@ -797,10 +800,9 @@ class MarkerDetector:
         cands = _Cands()
         if taken is None:
             taken = np.zeros((0, 4, 2))  # the polygons of the candidates fitted so far
-        searches = iter(searches)
-        # the first pass's candidates, then those of all later passes at once (their stages
-        # 2-5 ran on the worker meanwhile; one batch costs fewer numpy calls than one per pass)
-        taken = self._propose(gray, [s for s in [next(searches, None)] if s is not None], taken, cands, log)
+        # every pass's candidates at once, the later passes' waited for (their stages 2-5 ran on
+        # the worker meanwhile): one batch costs fewer numpy calls than one per pass, and less
+        # than proposing the first pass's candidates while the worker ends (3 % at 320 x 240)
         taken = self._propose(gray, list(searches), taken, cands, log)
         if not cands.quads:
             return []
@@ -1038,6 +1040,16 @@ def _detection(mid: int, corners: NDArray, hamming: int, margin: float, rotation
 def _take(cells: CellSample, rows: NDArray) -> CellSample:
     """The candidates ``rows`` of a cell sample."""
     return CellSample(cells.cells[rows], cells.ring[rows], None if cells.samples is None else cells.samples[rows])
+
+
+def _polygons(found: list[tuple[NDArray[np.int32], NDArray[np.int32]]], scale: NDArray) -> NDArray[np.float64]:
+    """The polygon corners (K, 4, 2) of a pass's candidates (:func:`find_candidates`' pairs) in
+    full-resolution pixels, clockwise, through the pass's (x, y) ``scale``."""
+    k = len(found)
+    if not k:
+        return np.zeros((0, 4, 2))
+    approx = _clockwise(np.array([q for _, q in found], np.float64).reshape(k, 4, 2))
+    return (approx + 0.5) * scale - 0.5
 
 
 def _clockwise(quads: NDArray) -> NDArray:

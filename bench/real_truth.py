@@ -55,17 +55,12 @@ ROOT = Path(__file__).resolve().parents[1]
 REAL = ROOT / "datasets/real"
 IMAGES = ["choriginal.jpg", "chocclusion_original.jpg"]
 #: OpenCV's tutorial board (samples/python/aruco_detect_board_charuco.py: -w=5 -h=7 -sl=0.04 -ml=0.02 -d=10)
-SQUARES, SQUARE_M, MARKER_M, DICTIONARY = (5, 7), 0.04, 0.02, "DICT_6X6_250"
+BOARD = CharucoBoard(5, 7, 0.04, 0.02, "DICT_6X6_250")
+SQUARE_M, DICTIONARY = BOARD.square_length, BOARD.dictionary
 MIN_NEIGHBOURS = 6
 OPENCV_REFINES = {"opencv": "CORNER_REFINE_NONE", "opencv_subpix": "CORNER_REFINE_SUBPIX",
                   "opencv_contour": "CORNER_REFINE_CONTOUR", "opencv_apriltag": "CORNER_REFINE_APRILTAG"}
 METHODS = ["visloc", "visloc_linear", *OPENCV_REFINES]
-
-
-def opencv_board() -> cv2.aruco.CharucoBoard:
-    """The tutorial board as OpenCV's ``CharucoBoard``."""
-    d = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, DICTIONARY))
-    return cv2.aruco.CharucoBoard(SQUARES, SQUARE_M, MARKER_M, d)
 
 
 def _local_homography(plane: np.ndarray, image: np.ndarray, centre: np.ndarray, radius: float,
@@ -90,16 +85,15 @@ def board_truth(chess_ids: np.ndarray, chess_px: np.ndarray, radius: float) -> t
     (ids (N,), pixels (N, 2)); the ids of the interior markers (all four corners of the
     marker's own square found: the truth is interpolated, not extrapolated towards the board's
     edge); and the leave-one-out errors (px) of the chessboard corners."""
-    board = opencv_board()
-    chess = board.getChessboardCorners()[:, :2]
+    chess = BOARD.chessboard_corners[:, :2]
     plane = chess[chess_ids]
     truth, interior = {}, set()
-    for mid, obj in zip(board.getIds().ravel().tolist(), board.getObjPoints(), strict=True):
-        centre = obj[:, :2].mean(axis=0)
+    for mid, obj in zip(BOARD.marker_ids.tolist(), BOARD.marker_corners[:, :, :2], strict=True):
+        centre = obj.mean(axis=0)
         H = _local_homography(plane, chess_px, centre, radius)
         if H is None:
             continue
-        truth[mid] = _through(H, obj[:, :2])
+        truth[mid] = _through(H, obj)
         own = np.flatnonzero(np.abs(chess - centre).max(axis=1) < 0.6 * SQUARE_M)  # the square's corners
         if len(own) == 4 and np.isin(own, chess_ids).all():
             interior.add(mid)
@@ -113,7 +107,7 @@ def board_truth(chess_ids: np.ndarray, chess_px: np.ndarray, radius: float) -> t
 
 def opencv_chess(gray: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """OpenCV's ChArUco corners (ids (N,), pixels (N, 2))."""
-    corners, ids, _, _ = cv2.aruco.CharucoDetector(opencv_board()).detectBoard(gray)
+    corners, ids, _, _ = cv2.aruco.CharucoDetector(BOARD.opencv).detectBoard(gray)
     if ids is None:
         return np.zeros(0, int), np.zeros((0, 2))
     return ids.ravel().astype(int), corners.reshape(-1, 2).astype(np.float64)
@@ -121,7 +115,7 @@ def opencv_chess(gray: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def visloc_chess(gray: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """visloc's saddle-fitted ChArUco corners (ids (N,), pixels (N, 2))."""
-    found = detect_charuco(gray, CharucoBoard(*SQUARES, SQUARE_M, MARKER_M, DICTIONARY), method="saddle")
+    found = detect_charuco(gray, BOARD, method="saddle")
     return np.asarray(found.ids, int).ravel(), np.asarray(found.corners, np.float64).reshape(-1, 2)
 
 

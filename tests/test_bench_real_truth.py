@@ -24,14 +24,14 @@ def test_the_truth_is_consistent_with_itself_and_with_a_second_corner_finder(res
 
 def test_the_truth_puts_a_synthetic_board_where_it_was_drawn():
     # a board drawn by OpenCV at a known scale: the truth of every marker equals its drawn corners
-    board = real_truth.opencv_board()
+    board = real_truth.BOARD
     px_per_m = 2000.0
-    image = board.generateImage((int(5 * 0.04 * px_per_m), int(7 * 0.04 * px_per_m)))
+    image = board.opencv.generateImage((int(5 * 0.04 * px_per_m), int(7 * 0.04 * px_per_m)))
     ids, px = real_truth.opencv_chess(image)
     truth, interior, loo = real_truth.board_truth(ids, px, 1.6)
     assert len(truth) == 17 and np.median(loo) < 0.05
     assert len(interior) == 7  # the markers whose square has no side on the board's edge
-    for mid, obj in zip(board.getIds().ravel().tolist(), board.getObjPoints(), strict=True):
+    for mid, obj in zip(board.marker_ids.tolist(), board.marker_corners, strict=True):
         drawn = obj[:, :2] * px_per_m - 0.5  # board metres -> pixel centres (the image's corner at -0.5)
         np.testing.assert_allclose(truth[mid], drawn, atol=0.1)
 
